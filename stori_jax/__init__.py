@@ -1,0 +1,43 @@
+"""stori-jax: the STORI stochastic-Atari benchmark as a JAX-native, vectorized suite.
+
+    import stori_jax
+    env = stori_jax.make("Breakout", "2.1", num_envs=8, seed=0)
+    obs, info = env.reset()
+    obs, reward, terminated, truncated, info = env.step(actions)
+
+Light to import: configuration and game tables load eagerly; the env, rollout and the JAX
+functions load on first use (the emulator workers import this package without JAX).
+"""
+
+from stori_jax.config import (ActionNoise, Config, ConceptDrift, ObservationMask,  # noqa: F401
+                              RandomEvent)
+from stori_jax.games import STORI_GAMES, get_game  # noqa: F401
+from stori_jax.presets import describe_preset, list_presets, preset  # noqa: F401
+
+__version__ = "0.1.0"
+
+_LAZY = {
+    "make": ("stori_jax.env", "make"),
+    "Env": ("stori_jax.env", "Env"),
+    "rollout": ("stori_jax.rollout", "rollout"),
+    "Trajectory": ("stori_jax.rollout", "Trajectory"),
+    "WorkerError": ("stori_jax.backends.subproc", "WorkerError"),
+    "EnvClosedError": ("stori_jax.backends.subproc", "EnvClosedError"),
+    "functional": ("stori_jax.functional", None),
+}
+
+__all__ = ["ActionNoise", "Config", "ConceptDrift", "ObservationMask", "RandomEvent",
+           "STORI_GAMES", "get_game", "describe_preset", "list_presets", "preset",
+           *_LAZY]
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        import importlib
+
+        module_name, attr = _LAZY[name]
+        module = importlib.import_module(module_name)
+        value = module if attr is None else getattr(module, attr)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'stori_jax' has no attribute {name!r}")

@@ -1,0 +1,1 @@
+"""Emulator backends. ``subproc`` (worker processes over shared memory) supports every mode."""

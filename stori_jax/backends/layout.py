@@ -1,0 +1,62 @@
+"""The shared-memory buffers exchanged between the parent and the emulator workers.
+
+One place for their names, shapes and dtypes; both sides build numpy views from this table.
+"""
+
+from __future__ import annotations
+
+import ctypes
+from dataclasses import dataclass
+
+import numpy as np
+
+SCREEN = (210, 160, 3)
+RAM_SIZE = 128
+
+# ram_render bits: bit j = render RAM-obs into screen slot j after a normal step;
+# bit 2 + j = the same for the first observation of a new episode (after an autoreset / reset).
+STEP_RENDER_BITS = (1, 2)
+RESET_RENDER_BITS = (4, 8)
+
+
+def buffer_specs(num_envs: int, frame_skip: int) -> dict[str, tuple[tuple[int, ...], type]]:
+    b = num_envs
+    return {
+        # parent -> workers
+        "executed": ((b, frame_skip), np.int32),      # minimal-set action index per frame
+        "event_u": ((b, frame_skip, 2), np.float32),   # per frame: firing draw, choice draw
+        "event_active": ((b,), np.uint8),              # event rule on (concept) for this step
+        "ram_render": ((b,), np.uint8),                # RAM-obs render bits (see above)
+        "noops": ((b,), np.int32),                     # no-op frames after a reset
+        "reset_first": ((b,), np.uint8),               # reset this env instead of stepping it
+        # workers -> parent
+        "frames": ((b, 2) + SCREEN, np.uint8),         # the last two screens
+        "ram": ((b, RAM_SIZE), np.uint8),
+        "reward": ((b,), np.float32),
+        "terminated": ((b,), np.uint8),
+        "truncated": ((b,), np.uint8),
+        "lives": ((b,), np.int32),
+        "event_fired": ((b,), np.int32),
+        "ram_rendered": ((b,), np.uint8),              # render bits actually applied (0..3)
+        "episode_return": ((b,), np.float32),          # final value where an episode ended
+        "episode_length": ((b,), np.int32),
+    }
+
+
+@dataclass
+class SharedBuffers:
+    """RawArrays (picklable into spawned workers) plus numpy views over them."""
+
+    raw: dict
+
+    @classmethod
+    def allocate(cls, ctx, num_envs: int, frame_skip: int) -> "SharedBuffers":
+        raw = {}
+        for name, (shape, dtype) in buffer_specs(num_envs, frame_skip).items():
+            nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
+            raw[name] = (ctx.RawArray(ctypes.c_uint8, nbytes), shape, np.dtype(dtype).str)
+        return cls(raw)
+
+    def views(self) -> dict[str, np.ndarray]:
+        return {name: np.frombuffer(arr, dtype=np.dtype(dtype)).reshape(shape)
+                for name, (arr, shape, dtype) in self.raw.items()}

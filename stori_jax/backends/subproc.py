@@ -1,0 +1,191 @@
+"""The ``subproc`` backend: W worker processes, each stepping B/W ALE emulators.
+
+Frames, RAM and flags travel through shared memory (no pickling); a one-byte Pipe message is the
+signal in each direction.  A worker that dies is noticed through its process sentinel, so the
+parent raises :class:`WorkerError` instead of hanging.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing as mp
+import os
+import sys
+import weakref
+from multiprocessing.connection import wait
+
+import numpy as np
+
+from stori_jax.backends.layout import SharedBuffers
+from stori_jax.backends.worker import WorkerSpec, worker_main
+
+
+class WorkerError(RuntimeError):
+    """An emulator worker died or failed."""
+
+
+class EnvClosedError(RuntimeError):
+    """The environment was used after close()."""
+
+
+def split_batch(num_envs: int, num_workers: int) -> list[tuple[int, int]]:
+    """Contiguous [lo, hi) env ranges, as even as possible."""
+    base, extra = divmod(num_envs, num_workers)
+    bounds, lo = [], 0
+    for w in range(num_workers):
+        hi = lo + base + (1 if w < extra else 0)
+        bounds.append((lo, hi))
+        lo = hi
+    return bounds
+
+
+@contextlib.contextmanager
+def _main_module_not_reimported():
+    """Spawned workers need nothing from ``__main__``; hide its path while starting them so
+    that a user's unguarded script (no ``if __name__ == "__main__"``) is not re-run in them."""
+    main = sys.modules.get("__main__")
+    saved = {k: getattr(main, k) for k in ("__file__", "__spec__") if hasattr(main, k)}
+    try:
+        for k in saved:
+            if k == "__file__":
+                delattr(main, k)
+            else:
+                setattr(main, k, None)
+        yield
+    finally:
+        for k, v in saved.items():
+            setattr(main, k, v)
+
+
+def _shutdown(processes, conns) -> None:
+    """Stop every worker: ask politely, then terminate, then kill."""
+    for conn in conns:
+        try:
+            conn.send_bytes(b"C")
+        except (OSError, ValueError):
+            pass
+    for p in processes:
+        p.join(timeout=1.0)
+    for p in processes:
+        if p.is_alive():
+            p.terminate()
+            p.join(timeout=1.0)
+        if p.is_alive():
+            p.kill()
+            p.join(timeout=1.0)
+    for conn in conns:
+        try:
+            conn.close()
+        except OSError:
+            pass
+
+
+class SubprocBackend:
+    """Owns the worker processes and the shared buffers of one batched env."""
+
+    def __init__(self, *, game: str, seeds: list[int], num_workers: int, frame_skip: int,
+                 per_frame: bool, event_mode: int | None, event_prob: float,
+                 ram_obs_mode: int | None, want_screens: bool, max_episode_frames: int,
+                 autoreset: bool = True):
+        num_envs = len(seeds)
+        ctx = mp.get_context("spawn")
+        self.buffers = SharedBuffers.allocate(ctx, num_envs, frame_skip)
+        self.views = self.buffers.views()
+        self.ranges = split_batch(num_envs, num_workers)
+        self.processes, self.conns = [], []
+        self._finalizer = weakref.finalize(self, _shutdown, self.processes, self.conns)
+        for lo, hi in self.ranges:
+            spec = WorkerSpec(game=game, env_lo=lo, env_hi=hi, seeds=tuple(seeds[lo:hi]),
+                              frame_skip=frame_skip, per_frame=per_frame, event_mode=event_mode,
+                              event_prob=event_prob, ram_obs_mode=ram_obs_mode,
+                              want_screens=want_screens, max_episode_frames=max_episode_frames,
+                              autoreset=autoreset)
+            parent_conn, child_conn = ctx.Pipe(duplex=True)
+            process = ctx.Process(target=worker_main, daemon=True,
+                                  args=(spec, self.buffers, child_conn, os.getpid()),
+                                  name=f"stori-jax-worker-{len(self.processes)}")
+            with _main_module_not_reimported():
+                process.start()
+            child_conn.close()
+            self.processes.append(process)
+            self.conns.append(parent_conn)
+        self._pending = False
+        try:
+            self._wait_all("start")
+        except BaseException:
+            self.close()
+            raise
+
+    @property
+    def closed(self) -> bool:
+        return not self._finalizer.alive
+
+    def _send_all(self, command: bytes) -> None:
+        if self.closed:
+            raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
+        if self._pending:
+            raise RuntimeError("a step is already in flight: call recv() before sending again")
+        for w, conn in enumerate(self.conns):
+            try:
+                conn.send_bytes(command)
+            except (OSError, ValueError):
+                self._raise_dead(w, "while sending a command")
+        self._pending = True
+
+    def _raise_dead(self, w: int, when: str):
+        p = self.processes[w]
+        p.join(timeout=0.5)
+        lo, hi = self.ranges[w]
+        self.close()
+        raise WorkerError(f"emulator worker {w} (envs {lo}..{hi - 1}, pid {p.pid}) died {when} "
+                          f"with exit code {p.exitcode}; the environment is closed")
+
+    def _wait_all(self, what: str) -> None:
+        waiting = dict(enumerate(self.conns))
+        sentinels = {p.sentinel: w for w, p in enumerate(self.processes)}
+        try:
+            while waiting:
+                ready = wait(list(waiting.values()) + list(sentinels), timeout=None)
+                for obj in ready:
+                    if obj in sentinels:
+                        w = sentinels[obj]
+                        if w in waiting and not waiting[w].poll():
+                            self._raise_dead(w, f"during {what}")
+                        continue
+                    w = next(k for k, c in waiting.items() if c is obj)
+                    try:
+                        reply = obj.recv_bytes()
+                    except (EOFError, OSError):
+                        self._raise_dead(w, f"during {what}")
+                    if reply[:1] == b"E":
+                        lo, hi = self.ranges[w]
+                        self.close()
+                        raise WorkerError(f"emulator worker {w} (envs {lo}..{hi - 1}) failed "
+                                          f"during {what}:\n{reply[1:].decode(errors='replace')}")
+                    del waiting[w]
+        finally:
+            self._pending = False
+
+    # -- the backend protocol ---------------------------------------------------------------
+
+    def send_reset(self) -> None:
+        self._send_all(b"R")
+
+    def send_step(self) -> None:
+        self._send_all(b"S")
+
+    def recv(self) -> dict[str, np.ndarray]:
+        """Wait for the workers; the returned views stay valid until the next send."""
+        if self.closed:
+            raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
+        if not self._pending:
+            raise RuntimeError("nothing in flight: call send_step() or send_reset() first")
+        self._wait_all("a step")
+        return self.views
+
+    def close(self) -> None:
+        self._finalizer()
+
+    @property
+    def pids(self) -> list[int]:
+        return [p.pid for p in self.processes]

@@ -1,0 +1,236 @@
+"""The emulator worker: owns a slice of the batch's ALE emulators and steps them on command.
+
+Deterministic: everything random arrives in the shared buffers (executed actions, event
+uniforms, RAM-obs render decisions, reset no-ops).  Imports numpy, ale-py and the game tables
+only (no JAX), so it starts fast.
+
+Protocol over a Pipe, one byte per command: b"S" step, b"R" reset all, b"C" close.
+Replies: b"K" done, or b"E" + a traceback.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import traceback
+from dataclasses import dataclass
+
+import numpy as np
+
+from stori_jax.backends.layout import RESET_RENDER_BITS, STEP_RENDER_BITS
+
+
+@dataclass(frozen=True)
+class WorkerSpec:
+    """Everything a worker needs besides its buffers and pipe (picklable)."""
+
+    game: str
+    env_lo: int
+    env_hi: int
+    seeds: tuple[int, ...]
+    frame_skip: int
+    per_frame: bool
+    event_mode: int | None
+    event_prob: float
+    ram_obs_mode: int | None
+    want_screens: bool
+    max_episode_frames: int
+    autoreset: bool = True
+
+
+class Emulator:
+    """One ALE emulator and its per-episode STORI bookkeeping."""
+
+    def __init__(self, spec: WorkerSpec, game, seed: int, index: int, views: dict):
+        from ale_py import ALEInterface, LoggerMode, roms
+
+        ALEInterface.setLoggerMode(LoggerMode.Error)
+        ale = ALEInterface()
+        ale.setInt("random_seed", int(seed))
+        ale.setFloat("repeat_action_probability", 0.0)
+        ale.setInt("max_num_frames_per_episode", int(spec.max_episode_frames))
+        ale.loadROM(roms.get_rom_path(game.rom_id))
+        self.ale = ale
+        self.actions = list(ale.getMinimalActionSet())
+        self.noop = self.actions[0]
+        self.spec = spec
+        self.i = index
+        self.rule = game.event_modes[spec.event_mode] if spec.event_mode is not None else None
+        self.ram_obs = game.ram_obs_modes[spec.ram_obs_mode] if spec.ram_obs_mode is not None else None
+        self.v = views
+        self.ram = views["ram"][index]          # true RAM, written in place
+        self.frames = views["frames"][index]    # (2, 210, 160, 3)
+        self.prev_ram = np.zeros(128, np.uint8)
+        self.start_ram = np.zeros(128, np.uint8)
+
+    # -- episode boundaries -------------------------------------------------------------------
+
+    def reset(self) -> None:
+        ale, v, i = self.ale, self.v, self.i
+        ale.reset_game()
+        for _ in range(int(v["noops"][i])):
+            ale.act(self.noop)
+            if ale.game_over():
+                ale.reset_game()
+        ale.getRAM(self.start_ram)
+        self.prev_ram[:] = self.start_ram
+        self.rule_state = self.rule.new_state() if self.rule is not None else None
+        self.carry = 0.0
+        self.episode_return = 0.0
+        self.episode_length = 0
+        rendered = 0
+        if self.spec.want_screens:
+            ale.getScreenRGB(self.frames[0])
+            self.frames[1] = self.frames[0]
+            for slot, bit in enumerate(RESET_RENDER_BITS):
+                if v["ram_render"][i] & bit and self.render_ram_obs(slot):
+                    rendered |= 1 << slot
+        ale.getRAM(self.ram)
+        v["ram_rendered"][i] = rendered
+        v["lives"][i] = ale.lives()
+
+    def render_ram_obs(self, slot: int) -> bool:
+        """Screen ``slot`` <- the next frame under NOOP of a RAM-modified copy of the game."""
+        ale = self.ale
+        ale.getRAM(self.ram)
+        writes = self.ram_obs.writes(self.ram)
+        if writes is None:
+            return False
+        state = ale.cloneState()
+        for address, value in writes.items():
+            ale.setRAM(address, value)
+        ale.act(self.noop)
+        ale.getScreenRGB(self.frames[slot])
+        ale.restoreState(state)
+        return True
+
+    # -- one agent step -----------------------------------------------------------------------
+
+    def step(self) -> None:
+        ale, v, i, spec = self.ale, self.v, self.i, self.spec
+        if v["reset_first"][i]:
+            for name in ("reward", "terminated", "truncated", "event_fired", "episode_return",
+                         "episode_length"):
+                v[name][i] = 0
+            self.reset()
+            return
+        skip, per_frame = spec.frame_skip, spec.per_frame
+        executed = v["executed"][i]
+        u = v["event_u"][i]
+        rule = self.rule
+        active = bool(v["event_active"][i]) and rule is not None
+        render_bits = int(v["ram_render"][i])
+        total = interval = 0.0
+        fired = rendered = 0
+        terminated = truncated = False
+        for f in range(skip):
+            draw = f if per_frame else 0
+            if active and rule.pre_frame is not None:
+                writes, hit = rule.pre_frame(self.start_ram, self.rule_state, float(u[draw, 0]),
+                                             spec.event_prob, per_frame or f == 0)
+                for address, value in writes.items():
+                    ale.setRAM(address, value)
+                fired += hit
+            interval += ale.act(self.actions[executed[f]]) + self.carry
+            self.carry = 0.0
+            terminated = ale.game_over(with_truncation=False)
+            truncated = ale.game_truncated()
+            done = terminated or truncated
+            if per_frame or f == skip - 1 or done:
+                if rule is not None and rule.post_frame is not None:
+                    ale.getRAM(self.ram)
+                    if active:
+                        out = rule.post_frame(self.prev_ram, self.ram, self.start_ram,
+                                              self.rule_state, float(u[draw, 0]),
+                                              float(u[draw, 1]), spec.event_prob,
+                                              ale.getEpisodeFrameNumber())
+                        for address, value in out.writes.items():
+                            ale.setRAM(address, value)
+                            self.ram[address] = value
+                        if out.zero_reward:
+                            if out.cancel_next_reward:
+                                self.carry = interval
+                            interval = 0.0
+                        fired += out.fired
+                    self.prev_ram[:] = self.ram
+                total += interval
+                interval = 0.0
+            if spec.want_screens and f >= skip - 2:
+                slot = max(f - (skip - 2), 0) if skip > 1 else 1
+                ale.getScreenRGB(self.frames[slot])
+                if render_bits & STEP_RENDER_BITS[slot] and self.render_ram_obs(slot):
+                    rendered |= 1 << slot
+            if done:
+                break
+        if spec.want_screens and skip == 1:
+            self.frames[0] = self.frames[1]
+        self.episode_return += total
+        self.episode_length += 1
+        v["reward"][i] = total
+        v["terminated"][i] = terminated
+        v["truncated"][i] = truncated
+        v["event_fired"][i] = fired
+        done = terminated or truncated
+        v["episode_return"][i] = self.episode_return if done else 0.0
+        v["episode_length"][i] = self.episode_length if done else 0
+        if done and spec.autoreset:
+            self.reset()  # autoreset: the observation is the next episode's first one
+        else:
+            v["ram_rendered"][i] = rendered
+            ale.getRAM(self.ram)
+            v["lives"][i] = ale.lives()
+
+
+def _die_with_parent() -> None:
+    """Ask Linux to kill this worker if the parent dies (no orphans after a hard kill)."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+def worker_main(spec: WorkerSpec, buffers, conn, parent_pid: int) -> None:
+    """Entry point of a worker process."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    _die_with_parent()
+    if os.getppid() != parent_pid:
+        return
+    try:
+        from stori_jax.games import get_game
+
+        game = get_game(spec.game)
+        views = buffers.views()
+        emulators = [Emulator(spec, game, seed, i, views)
+                     for i, seed in zip(range(spec.env_lo, spec.env_hi), spec.seeds)]
+        conn.send_bytes(b"K")
+    except BaseException:
+        conn.send_bytes(b"E" + traceback.format_exc().encode())
+        return
+    while True:
+        try:
+            command = conn.recv_bytes()
+        except (EOFError, OSError):
+            return
+        try:
+            if command == b"S":
+                for emulator in emulators:
+                    emulator.step()
+            elif command == b"R":
+                for emulator in emulators:
+                    emulator.reset()
+            elif command == b"C":
+                conn.send_bytes(b"K")
+                return
+            else:
+                raise RuntimeError(f"unknown command {command!r}")
+            conn.send_bytes(b"K")
+        except (BrokenPipeError, EOFError):
+            return
+        except BaseException:
+            try:
+                conn.send_bytes(b"E" + traceback.format_exc().encode())
+            finally:
+                return

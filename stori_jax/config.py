@@ -1,0 +1,255 @@
+"""Configuration of a STORI environment: frozen, validated dataclasses.
+
+A :class:`Config` names which perturbations are active.  Each part is optional and several may be
+combined (the reference allows one at a time; its taxonomy ``type`` is derived from the parts):
+
+- :class:`ActionNoise`      type 1    executed action != intended action
+- :class:`RandomEvent`      type 2.1  game-specific RAM events
+- :class:`ConceptDrift`     type 2.2  switch to a secondary concept over time
+- :class:`ObservationMask`  type 3.2  crop, blackout or RAM-rendered hiding
+- ``ram_observation=True``  type 0    the observation is the 128-byte RAM plus labels
+
+Validation happens at construction; every error is a ``ValueError`` that names the field and the
+allowed values.  Game-specific modes (blackout, RAM and event modes) are checked against the game
+when ``game`` is given, and again by :func:`stori_jax.make`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+GRANULARITIES = ("frame", "step")
+DRIFT_SCHEDULES = ("sudden", "cyclic", "gradual")
+MASK_KINDS = ("crop", "blackout", "ram")
+CROP_MODES = (1, 2, 3, 4, 5)  # 0 ("none") is expressed by leaving the mask out
+TAXONOMY_TYPES = ("0", "1", "2.1", "2.2", "3.1", "3.2")
+SECONDARY_TYPES = ("1", "2.1", "3.2")
+
+
+def _check_probability(owner: str, name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{owner}.{name} must be a number in [0, 1], got {value!r}")
+    value = float(value)
+    if not 0.0 <= value <= 1.0:
+        raise ValueError(f"{owner}.{name} must be in [0, 1], got {value}")
+    return value
+
+
+def _check_int(owner: str, name: str, value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ValueError(f"{owner}.{name} must be an int, got {value!r}")
+    return value
+
+
+def _check_choice(owner: str, name: str, value: Any, allowed) -> Any:
+    if value not in allowed:
+        raise ValueError(f"{owner}.{name} must be one of {list(allowed)}, got {value!r}")
+    return value
+
+
+@dataclass(frozen=True)
+class ActionNoise:
+    """Type 1: with probability ``prob`` per frame (or step) the intended action is replaced.
+
+    ``sticky=False``: the replacement is drawn uniformly from ``replacement_actions`` (``None``
+    means the game's default set: the whole minimal action set, or actions 0..9 on BankHeist).
+    ``sticky=True``: the PREVIOUS executed action is repeated instead (Machado et al. 2018).
+    """
+
+    prob: float
+    replacement_actions: tuple[int, ...] | None = None
+    sticky: bool = False
+
+    def __post_init__(self):
+        object.__setattr__(self, "prob", _check_probability("ActionNoise", "prob", self.prob))
+        if not isinstance(self.sticky, bool):
+            raise ValueError(f"ActionNoise.sticky must be True or False, got {self.sticky!r}")
+        if self.replacement_actions is not None:
+            actions = tuple(self.replacement_actions)
+            if not actions or any(isinstance(a, bool) or not isinstance(a, int) or a < 0
+                                  for a in actions):
+                raise ValueError("ActionNoise.replacement_actions must be a non-empty tuple of "
+                                 f"action indices >= 0 (or None), got {self.replacement_actions!r}")
+            if self.sticky:
+                raise ValueError("ActionNoise.replacement_actions cannot be combined with "
+                                 "sticky=True (sticky repeats the previous action)")
+            object.__setattr__(self, "replacement_actions", actions)
+
+
+@dataclass(frozen=True)
+class RandomEvent:
+    """Type 2.1: the game's random event ``mode`` fires with probability ``prob`` when its
+    condition holds (per emulator frame at ``frame`` granularity, per agent step at ``step``)."""
+
+    mode: int
+    prob: float
+
+    def __post_init__(self):
+        mode = _check_int("RandomEvent", "mode", self.mode)
+        if mode < 1:
+            raise ValueError(f"RandomEvent.mode must be >= 1 (a game's event modes), got {mode}")
+        object.__setattr__(self, "prob", _check_probability("RandomEvent", "prob", self.prob))
+
+
+@dataclass(frozen=True)
+class ObservationMask:
+    """Type 3.2: hide part of the observation with probability ``prob`` per frame (or step).
+
+    kind ``crop`` (any game): mode 1 left half, 2 right half, 3 top half, 4 bottom half, 5 torch.
+    kind ``blackout``: fill the game's named regions (see the game's blackout table).
+    kind ``ram``: render the frame from a modified copy of the RAM (see the game's RAM table).
+    """
+
+    kind: str
+    mode: int
+    prob: float = 1.0
+
+    def __post_init__(self):
+        _check_choice("ObservationMask", "kind", self.kind, MASK_KINDS)
+        mode = _check_int("ObservationMask", "mode", self.mode)
+        if self.kind == "crop":
+            _check_choice("ObservationMask", "mode (crop)", mode, CROP_MODES)
+        elif mode < 1:
+            raise ValueError(f"ObservationMask.mode must be >= 1 for kind {self.kind!r}, got {mode}")
+        object.__setattr__(self, "prob", _check_probability("ObservationMask", "prob", self.prob))
+
+
+@dataclass(frozen=True)
+class ConceptDrift:
+    """Type 2.2: concept 1 is the default game (3.1); concept 2 is ``secondary``.
+
+    Concept of 0-indexed agent step k of an episode (the counter restarts at every reset):
+    - ``sudden``:  concept 2 iff k >= period
+    - ``cyclic``:  concept 2 iff (k // period) % 2 == 1
+    - ``gradual``: concept 2 with probability clip((k - period) / period, 0, 1)
+    """
+
+    schedule: str
+    period: int
+    secondary: "Config"
+
+    def __post_init__(self):
+        _check_choice("ConceptDrift", "schedule", self.schedule, DRIFT_SCHEDULES)
+        period = _check_int("ConceptDrift", "period", self.period)
+        if period < 1:
+            raise ValueError(f"ConceptDrift.period (T) must be >= 1 agent step, got {period}")
+        if not isinstance(self.secondary, Config):
+            raise ValueError("ConceptDrift.secondary must be a Config of type "
+                             f"{list(SECONDARY_TYPES)}, got {self.secondary!r}")
+        secondary_type = self.secondary.type
+        if self.secondary.drift is not None:
+            raise ValueError("ConceptDrift.secondary cannot itself be a 2.2 concept drift "
+                             f"(allowed secondary types: {list(SECONDARY_TYPES)})")
+        if secondary_type not in SECONDARY_TYPES:
+            raise ValueError(f"ConceptDrift.secondary must be of type {list(SECONDARY_TYPES)}, "
+                             f"got type {secondary_type!r}")
+
+
+@dataclass(frozen=True)
+class Config:
+    """A STORI environment configuration. All parts default to "off" (type 3.1)."""
+
+    action_noise: ActionNoise | None = None
+    event: RandomEvent | None = None
+    drift: ConceptDrift | None = None
+    observation: ObservationMask | None = None
+    ram_observation: bool = False
+    granularity: str = "frame"
+    game: str | None = None
+    type: str = field(default="")
+
+    def __post_init__(self):
+        for name, cls in (("action_noise", ActionNoise), ("event", RandomEvent),
+                          ("drift", ConceptDrift), ("observation", ObservationMask)):
+            value = getattr(self, name)
+            if value is not None and not isinstance(value, cls):
+                raise ValueError(f"Config.{name} must be a {cls.__name__} or None, got {value!r}")
+        if not isinstance(self.ram_observation, bool):
+            raise ValueError(f"Config.ram_observation must be True or False, "
+                             f"got {self.ram_observation!r}")
+        _check_choice("Config", "granularity", self.granularity, GRANULARITIES)
+        if self.ram_observation and self.observation is not None:
+            raise ValueError("Config.ram_observation (type 0) observes the RAM, so it cannot be "
+                             "combined with an observation mask (type 3.2)")
+        derived = self._derive_type()
+        if self.type:
+            _check_choice("Config", "type", self.type, TAXONOMY_TYPES + ("mixed",))
+            if self.type != derived:
+                raise ValueError(f"Config.type {self.type!r} does not match its parts, which make "
+                                 f"type {derived!r}")
+        object.__setattr__(self, "type", derived)
+        if self.drift is not None:
+            for name in ("action_noise", "event", "observation"):
+                if getattr(self, name) is not None and getattr(self.drift.secondary, name) is not None:
+                    raise ValueError(f"Config.{name} is set both directly and in drift.secondary; "
+                                     "set it in one place only")
+        if self.game is not None:
+            from stori_jax.games import get_game  # local import: games imports nothing of ours
+
+            get_game(self.game).validate(self)
+
+    def _derive_type(self) -> str:
+        parts = [t for t, on in (("0", self.ram_observation),
+                                 ("1", self.action_noise is not None),
+                                 ("2.1", self.event is not None),
+                                 ("2.2", self.drift is not None),
+                                 ("3.2", self.observation is not None)) if on]
+        if not parts:
+            return "3.1"
+        return parts[0] if len(parts) == 1 else "mixed"
+
+    # -- helpers -----------------------------------------------------------------------------
+
+    def replace(self, **changes) -> "Config":
+        """A copy with ``changes`` applied (re-validated; the type is derived again)."""
+        changes.setdefault("type", "")
+        return dataclasses.replace(self, **changes)
+
+    def for_game(self, game: str) -> "Config":
+        """This config bound to ``game`` (validated against its modes)."""
+        return self.replace(game=game)
+
+    def components(self) -> list[tuple[str, object, bool]]:
+        """(name, part, under_drift) for every active part, the drift's secondary included."""
+        out = []
+        for name in ("action_noise", "event", "observation"):
+            if getattr(self, name) is not None:
+                out.append((name, getattr(self, name), False))
+        if self.drift is not None:
+            for name in ("action_noise", "event", "observation"):
+                part = getattr(self.drift.secondary, name)
+                if part is not None:
+                    out.append((name, part, True))
+        return out
+
+    def describe(self) -> str:
+        bits = []
+        for name, part, drifted in self.components():
+            bits.append(("concept 2: " if drifted else "") + _describe_part(part))
+        if self.drift is not None:
+            bits.insert(0, f"{self.drift.schedule} drift, T={self.drift.period}")
+        if self.ram_observation:
+            bits.append("RAM observation")
+        return f"type {self.type}" + (" (" + "; ".join(bits) + ")" if bits else " (default)")
+
+    # -- the reference's configuration format ---------------------------------------------------
+
+    @classmethod
+    def from_reference(cls, d: Mapping[str, Any], game: str | None = None) -> "Config":
+        """Load the reference STORI configuration format (nested dict or flat dotted keys)."""
+        from stori_jax.reference_format import config_from_reference
+
+        return config_from_reference(d, game=game)
+
+
+def _describe_part(part) -> str:
+    if isinstance(part, ActionNoise):
+        kind = "sticky" if part.sticky else "uniform replacement"
+        return f"action noise {kind} p={part.prob:g}"
+    if isinstance(part, RandomEvent):
+        return f"event mode {part.mode} p={part.prob:g}"
+    if isinstance(part, ObservationMask):
+        return f"{part.kind} mode {part.mode} p={part.prob:g}"
+    return repr(part)

@@ -1,0 +1,156 @@
+"""The JAX side of one env step: what happens before the emulators run and after.
+
+``before_step`` draws everything random (executed actions, event uniforms, mask and RAM-obs
+decisions, concept, reset no-ops); ``after_step`` masks and preprocesses the screens and updates
+the env state.  Both are pure functions of (state, inputs) with a static :class:`Plan`.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from stori_jax import functional as F
+from stori_jax.backends.layout import RESET_RENDER_BITS, STEP_RENDER_BITS
+from stori_jax.games import get_game
+from stori_jax.plan import Plan
+
+
+class EnvState(NamedTuple):
+    key: jax.Array
+    episode_step: jax.Array    # (B,) agent steps taken in the current episode
+    prev_executed: jax.Array   # (B,) last executed action (sticky actions)
+    stack: jax.Array           # (B, 84, 84, 4) for atari84, else a (B,) placeholder
+
+
+class Draws(NamedTuple):
+    """Everything random about one step (drawn before the emulators run)."""
+
+    executed: jax.Array        # (B, frame_skip) int32, what the emulators execute
+    executed_slots: jax.Array  # (B, num_slots): per frame, or (B, 1) at step granularity
+    corrupted: jax.Array       # (B, num_slots) bool
+    event_u: jax.Array         # (B, frame_skip, 2) float32
+    event_active: jax.Array    # (B,) uint8
+    ram_render: jax.Array      # (B,) uint8 bits
+    noops: jax.Array           # (B,) int32
+    concept: jax.Array         # (B,) int32
+    mask_apply: jax.Array      # (B, 2) bool, before the concept/new-episode gate
+    mask_centres: jax.Array    # (B, 2, 2) int32
+    step_active: jax.Array     # (B,) bool: the mask/RAM-obs component is on for this step
+
+
+def initial_state(plan: Plan, seed: int) -> EnvState:
+    b = plan.num_envs
+    stack = (jnp.zeros((b, 84, 84, 4), jnp.uint8) if plan.obs == "atari84"
+             else jnp.zeros((b,), jnp.uint8))
+    return EnvState(key=jax.random.PRNGKey(seed), episode_step=jnp.zeros((b,), jnp.int32),
+                    prev_executed=jnp.zeros((b,), jnp.int32), stack=stack)
+
+
+def _component_active(under_drift: bool, concept: jax.Array) -> jax.Array:
+    return concept == 1 if under_drift else jnp.ones(concept.shape, bool)
+
+
+@functools.partial(jax.jit, static_argnames=("plan", "resetting"))
+def before_step(plan: Plan, state: EnvState, actions: jax.Array, resetting: bool = False):
+    """(new state, Draws) for one agent step (or, with ``resetting``, for a reset of all envs)."""
+    b, skip = plan.num_envs, plan.frame_skip
+    key, step_key = jax.random.split(state.key)
+    keys = F.env_keys(step_key, b)
+    if plan.drift_schedule is not None and not resetting:
+        concept = F.concept_of(F.purpose_keys(keys, F.Purpose.DRIFT), state.episode_step,
+                               plan.drift_schedule, plan.drift_period)
+    else:
+        concept = jnp.zeros((b,), jnp.int32)
+
+    actions = jnp.asarray(actions, jnp.int32)
+    if plan.noise is not None:
+        n = plan.noise
+        slots, corrupted = F.corrupt_actions(
+            F.purpose_keys(keys, F.Purpose.ACTIONS), actions, state.prev_executed,
+            prob=n.prob, num_slots=plan.num_slots, replacement=n.replacement, sticky=n.sticky,
+            active=_component_active(n.under_drift, concept))
+    else:
+        slots = jnp.broadcast_to(actions[:, None], (b, plan.num_slots))
+        corrupted = jnp.zeros((b, plan.num_slots), bool)
+    executed = slots if plan.per_frame else jnp.repeat(slots, skip, axis=1)
+
+    if plan.event is not None:
+        event_u = F.event_uniforms(F.purpose_keys(keys, F.Purpose.EVENTS), skip)
+        event_active = _component_active(plan.event.under_drift, concept)
+    else:
+        event_u = jnp.ones((b, skip, 2), jnp.float32)
+        event_active = jnp.zeros((b,), bool)
+
+    mask_apply = jnp.zeros((b, 2), bool)
+    centres = jnp.zeros((b, 2, 2), jnp.int32)
+    step_active = jnp.zeros((b,), bool)
+    ram_render = jnp.zeros((b,), jnp.uint8)
+    if plan.mask is not None:
+        m = plan.mask
+        mask_apply, centres = F.draw_mask_decisions(
+            F.purpose_keys(keys, F.Purpose.OBSERVATION), prob=m.prob, per_frame=plan.per_frame,
+            torch=m.torch)
+        step_active = _component_active(m.under_drift, concept) & (not resetting)
+        if m.kind == "ram":
+            # the first obs of an episode is seen under concept 1 (episode step 0)
+            reset_on = not m.under_drift
+            bits = jnp.zeros((b,), jnp.int32)
+            for slot in range(2):
+                bits |= jnp.where(mask_apply[:, slot] & step_active, STEP_RENDER_BITS[slot], 0)
+                if reset_on:
+                    bits |= jnp.where(mask_apply[:, slot], RESET_RENDER_BITS[slot], 0)
+            ram_render = bits.astype(jnp.uint8)
+
+    if plan.noop_max > 0:
+        noops = jax.vmap(lambda k: jax.random.randint(k, (), 0, plan.noop_max + 1))(
+            F.purpose_keys(keys, F.Purpose.NOOPS))
+    else:
+        noops = jnp.zeros((b,), jnp.int32)
+
+    new_state = state._replace(key=key, prev_executed=executed[:, -1])
+    draws = Draws(executed=executed, executed_slots=slots, corrupted=corrupted, event_u=event_u,
+                  event_active=event_active.astype(jnp.uint8), ram_render=ram_render,
+                  noops=noops.astype(jnp.int32), concept=concept, mask_apply=mask_apply,
+                  mask_centres=centres, step_active=step_active)
+    return new_state, draws
+
+
+@functools.partial(jax.jit, static_argnames=("plan",))
+def after_step(plan: Plan, state: EnvState, draws: Draws, frames, ram, ram_rendered,
+               new_episode):
+    """(new state, obs, obs_masked, labels) from the workers' outputs.
+
+    ``new_episode`` (B,) bool marks envs whose observation is the first of an episode."""
+    game = get_game(plan.game)
+    masked = jnp.zeros((plan.num_envs,), bool)
+    if plan.mask is not None and plan.mask.kind != "ram" and plan.obs != "ram":
+        m = plan.mask
+        reset_on = not m.under_drift
+        gate = jnp.where(new_episode, reset_on, draws.step_active)
+        apply = draws.mask_apply & gate[:, None]
+        if m.torch:
+            frames = F.apply_masks(frames, apply, centres=draws.mask_centres)
+        else:
+            hidden, fill = plan.static_mask(game)
+            frames = F.apply_masks(frames, apply, hidden=hidden, fill=fill)
+        masked = apply.any(axis=1)
+    elif plan.mask is not None and plan.mask.kind == "ram":
+        masked = ram_rendered != 0
+
+    stack = state.stack
+    if plan.obs == "raw":
+        obs = F.max_pool(frames)
+    elif plan.obs == "atari84":
+        stack = F.push_frame(state.stack, F.atari84_frame(frames), new_episode)
+        obs = stack
+    elif plan.obs == "dreamer64":
+        obs = F.dreamer64(frames)
+    else:
+        obs = jnp.asarray(ram) + jnp.uint8(0)
+    labels = F.extract_labels(game, ram)
+    episode_step = jnp.where(new_episode, 0, state.episode_step + 1)
+    return state._replace(episode_step=episode_step, stack=stack), obs, masked, labels

@@ -1,0 +1,277 @@
+"""The batched environment: ``stori_jax.make`` and :class:`Env`."""
+
+from __future__ import annotations
+
+import numbers
+
+import gymnasium as gym
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from stori_jax.backends.subproc import EnvClosedError, SubprocBackend
+from stori_jax.config import Config, GRANULARITIES
+from stori_jax.core import after_step, before_step, initial_state
+from stori_jax.games import get_game
+from stori_jax.plan import OBS_KINDS, Plan, compile_plan
+from stori_jax.presets import preset as get_preset
+
+BACKENDS = ("subproc", "envpool")
+
+
+def emulator_seeds(seed: int, num_envs: int) -> list[int]:
+    """ALE seeds of envs 0..B-1: a function of the seed and the env index alone."""
+    return [int(np.random.SeedSequence([seed, i]).generate_state(1)[0] & 0x7FFFFFFF)
+            for i in range(num_envs)]
+
+
+def _check_int(name: str, value, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise ValueError(f"{name} must be an int >= {minimum}, got {value!r}")
+    if value < minimum:
+        raise ValueError(f"{name} must be >= {minimum}, got {value}")
+    return int(value)
+
+
+def resolve_config(game: str, preset: str | None, config: Config | None) -> Config:
+    if preset is not None and config is not None:
+        raise ValueError("pass either preset or config, not both")
+    if config is None:
+        return get_preset(game, preset) if preset is not None else Config()
+    if not isinstance(config, Config):
+        raise ValueError(f"config must be a stori_jax.Config, got {type(config).__name__}")
+    return config
+
+
+def make(game: str, preset: str | None = None, *, config: Config | None = None,
+         num_envs: int, seed: int, backend: str = "subproc", num_workers: int | None = None,
+         obs: str | None = None, frame_skip: int = 4, granularity: str | None = None,
+         max_episode_frames: int = 108000, noop_max: int = 0, autoreset: bool = True) -> "Env":
+    """A batched STORI environment of ``num_envs`` emulators.
+
+    ``preset``: a paper preset name of ``game`` (see ``stori_jax.list_presets()``), or ``config``:
+    a :class:`stori_jax.Config`; neither means the default game (3.1).  ``obs``: ``raw``
+    (210x160x3), ``atari84`` (84x84 gray, 4 stacked; the default), ``dreamer64`` (64x64 RGB), or
+    ``ram`` (the 128 RAM bytes; the default and only choice for type 0).  ``granularity``
+    overrides the config's (``frame``: perturbations per emulator frame, as the reference;
+    ``step``: once per agent step).  With ``autoreset`` (default) an env whose episode ended
+    returns the first observation of its next episode in the same step.
+    """
+    spec = get_game(game)
+    cfg = resolve_config(game, preset, config)
+    if cfg.game is not None and get_game(cfg.game) is not spec:
+        raise ValueError(f"config is bound to game {cfg.game!r} but make() was asked for {game!r}")
+    if granularity is not None:
+        if granularity not in GRANULARITIES:
+            raise ValueError(f"granularity must be one of {list(GRANULARITIES)} or None, "
+                             f"got {granularity!r}")
+        cfg = cfg.replace(granularity=granularity)
+    num_envs = _check_int("num_envs", num_envs, 1)
+    seed = _check_int("seed", seed, 0)
+    frame_skip = _check_int("frame_skip", frame_skip, 1)
+    max_episode_frames = _check_int("max_episode_frames", max_episode_frames, 1)
+    noop_max = _check_int("noop_max", noop_max, 0)
+    if obs is None:
+        obs = "ram" if cfg.ram_observation else "atari84"
+    if obs not in OBS_KINDS:
+        raise ValueError(f"obs must be one of {list(OBS_KINDS)}, got {obs!r}")
+    if cfg.ram_observation and obs != "ram":
+        raise ValueError(f"type 0 (ram_observation) observes the RAM: obs must be 'ram', got {obs!r}")
+    if obs == "ram" and cfg.observation is not None:
+        raise ValueError("obs='ram' cannot show an observation mask (type 3.2); use a screen obs")
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
+    plan = compile_plan(cfg, spec, num_envs=num_envs, frame_skip=frame_skip, obs=obs,
+                        noop_max=noop_max, autoreset=bool(autoreset))
+    if backend == "envpool":
+        from envpool_bridge import make_envpool_backend  # raises a clear error if unsupported
+
+        return Env(plan, cfg, seed, make_envpool_backend(plan, cfg, seed, max_episode_frames))
+    cores = _available_cores()
+    if num_workers is None:
+        num_workers = min(cores, num_envs)
+    num_workers = _check_int("num_workers", num_workers, 1)
+    if num_workers > num_envs:
+        raise ValueError(f"num_workers must be <= num_envs ({num_envs}), got {num_workers}")
+    wants_screens = obs != "ram"
+    event, mask = plan.event, plan.mask
+    worker_backend = SubprocBackend(
+        game=spec.name, seeds=emulator_seeds(seed, num_envs), num_workers=num_workers,
+        frame_skip=frame_skip, per_frame=plan.per_frame,
+        event_mode=event.mode if event else None, event_prob=event.prob if event else 0.0,
+        ram_obs_mode=mask.mode if mask is not None and mask.kind == "ram" else None,
+        want_screens=wants_screens, max_episode_frames=max_episode_frames,
+        autoreset=plan.autoreset)
+    return Env(plan, cfg, seed, worker_backend)
+
+
+def _available_cores() -> int:
+    import os
+
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:
+        return os.cpu_count() or 1
+
+
+def observation_space(plan: Plan) -> gym.spaces.Box:
+    shape = {"raw": (210, 160, 3), "atari84": (84, 84, 4), "dreamer64": (64, 64, 3),
+             "ram": (128,)}[plan.obs]
+    return gym.spaces.Box(0, 255, (plan.num_envs,) + shape, np.uint8)
+
+
+class Env:
+    """A batch of B STORI environments. Outputs are jax arrays with a leading batch axis.
+
+    ``step(actions)`` = ``send(actions)`` + ``recv()``: between the two the emulators run, so an
+    agent can compute on the device meanwhile.
+    """
+
+    def __init__(self, plan: Plan, config: Config, seed: int, backend):
+        self.plan = plan
+        self.config = config
+        self.seed = seed
+        self.game = get_game(plan.game)
+        self.backend = backend
+        self.num_envs = plan.num_envs
+        self.num_actions = plan.num_actions
+        self.action_space = gym.spaces.MultiDiscrete(np.full(plan.num_envs, plan.num_actions))
+        self.observation_space = observation_space(plan)
+        self.single_action_space = gym.spaces.Discrete(plan.num_actions)
+        self.single_observation_space = gym.spaces.Box(0, 255, self.observation_space.shape[1:],
+                                                       np.uint8)
+        self._state = initial_state(plan, seed)
+        self._in_flight = None
+        self._needs_reset = True
+        self._reset_pending = np.zeros(plan.num_envs, bool)
+
+    # -- lifecycle ------------------------------------------------------------------------------
+
+    def close(self) -> None:
+        self.backend.close()
+
+    @property
+    def closed(self) -> bool:
+        return self.backend.closed
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def __del__(self):
+        backend = getattr(self, "backend", None)
+        if backend is not None:
+            backend.close()
+
+    def _check_open(self):
+        if self.closed:
+            raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
+
+    # -- reset ----------------------------------------------------------------------------------
+
+    def reset(self):
+        """Reset every env. Returns (obs, info)."""
+        self._check_open()
+        if self._in_flight is not None:
+            self.backend.recv()
+            self._in_flight = None
+        zeros = jnp.zeros((self.num_envs,), jnp.int32)
+        state = self._state._replace(episode_step=zeros, prev_executed=zeros)
+        state, draws = before_step(self.plan, state, zeros, resetting=True)
+        views = self.backend.views
+        self._write_inputs(views, draws, reset_first=None)
+        self.backend.send_reset()
+        out = self.backend.recv()
+        self._needs_reset = False
+        self._reset_pending[:] = False
+        new_episode = np.ones(self.num_envs, bool)
+        obs, info = self._finish(state, draws, out, new_episode)
+        return obs, info
+
+    # -- step -----------------------------------------------------------------------------------
+
+    def validate_actions(self, actions) -> np.ndarray:
+        """Host-side check: shape (B,), integer dtype, values in [0, num_actions)."""
+        expected = f"shape ({self.num_envs},) of ints in [0, {self.num_actions - 1}]"
+        try:
+            a = np.asarray(actions)
+        except Exception as e:  # noqa: BLE001 - anything not array-like
+            raise ValueError(f"actions must be an array of {expected}, got {actions!r}") from e
+        if a.shape != (self.num_envs,):
+            raise ValueError(f"actions must have {expected}, got shape {a.shape}")
+        if not np.issubdtype(a.dtype, np.integer):
+            raise ValueError(f"actions must have an integer dtype ({expected}), got {a.dtype}")
+        if a.size and (a.min() < 0 or a.max() >= self.num_actions):
+            raise ValueError(f"actions out of range: expected {expected}, got values "
+                             f"{a.min()}..{a.max()}")
+        return a.astype(np.int32)
+
+    def send(self, actions) -> None:
+        """Start one step of every env with ``actions`` (B,) ints."""
+        self._check_open()
+        if self._needs_reset:
+            raise RuntimeError("call reset() before the first step")
+        if self._in_flight is not None:
+            raise RuntimeError("a step is already in flight: call recv() before send() again")
+        a = self.validate_actions(actions)
+        state, draws = before_step(self.plan, self._state, a)
+        self._write_inputs(self.backend.views, draws, reset_first=self._reset_pending)
+        self.backend.send_step()
+        self._in_flight = (state, draws, a, self._reset_pending.copy())
+
+    def recv(self):
+        """Finish the step started by :meth:`send`: (obs, reward, terminated, truncated, info)."""
+        self._check_open()
+        if self._in_flight is None:
+            raise RuntimeError("nothing in flight: call send(actions) first")
+        state, draws, actions, was_reset = self._in_flight
+        self._in_flight = None
+        out = self.backend.recv()
+        terminated = out["terminated"].astype(bool)
+        truncated = out["truncated"].astype(bool)
+        done = terminated | truncated
+        new_episode = was_reset | (done if self.plan.autoreset else False)
+        self._reset_pending = np.zeros(self.num_envs, bool) if self.plan.autoreset else done.copy()
+        obs, info = self._finish(state, draws, out, new_episode)
+        per_slot = self.plan.per_frame
+        info["executed_action"] = draws.executed_slots if per_slot else draws.executed_slots[:, 0]
+        info["action_corrupted"] = draws.corrupted if per_slot else draws.corrupted[:, 0]
+        info["event_fired"] = jnp.asarray(out["event_fired"].copy())
+        info["concept"] = draws.concept
+        info["episode_return"] = jnp.asarray(out["episode_return"].copy())
+        info["episode_length"] = jnp.asarray(out["episode_length"].copy())
+        info["reset_step"] = jnp.asarray(was_reset)
+        reward = jnp.asarray(out["reward"].copy())
+        return obs, reward, jnp.asarray(terminated), jnp.asarray(truncated), info
+
+    def step(self, actions):
+        """One agent step of every env: (obs, reward, terminated, truncated, info)."""
+        self.send(actions)
+        return self.recv()
+
+    # -- internals ------------------------------------------------------------------------------
+
+    def _write_inputs(self, views, draws, reset_first) -> None:
+        host = jax.device_get((draws.executed, draws.event_u, draws.event_active,
+                               draws.ram_render, draws.noops))
+        (views["executed"][...], views["event_u"][...], views["event_active"][...],
+         views["ram_render"][...], views["noops"][...]) = host
+        views["reset_first"][...] = 0 if reset_first is None else reset_first
+
+    def _finish(self, state, draws, out, new_episode):
+        state, obs, masked, labels = after_step(
+            self.plan, state, draws, out["frames"], out["ram"].copy(),
+            out["ram_rendered"].copy(), jnp.asarray(new_episode))
+        # the workers overwrite their buffers on the next send: finish reading them now
+        obs = jax.block_until_ready(obs)
+        self._state = state
+        info = {"obs_masked": masked, "lives": jnp.asarray(out["lives"].copy()),
+                "ram": jnp.asarray(out["ram"].copy()), "labels": labels,
+                "concept": jnp.zeros((self.num_envs,), jnp.int32)}
+        return obs, info
+
+    def __repr__(self):
+        return (f"Env({self.plan.game}, {self.config.describe()}, num_envs={self.num_envs}, "
+                f"obs={self.plan.obs!r}, granularity={self.config.granularity!r})")

@@ -1,0 +1,46 @@
+"""Type 1: action corruption (uniform replacement from a set, or sticky repeat)."""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import jax
+import jax.numpy as jnp
+
+
+def corrupt_actions(keys: jax.Array, actions: jax.Array, prev_executed: jax.Array, *,
+                    prob: float, num_slots: int, replacement: Sequence[int] | None = None,
+                    sticky: bool = False, active: jax.Array | None = None):
+    """Executed actions for one agent step.
+
+    keys (B,), actions (B,) intended, prev_executed (B,) the last executed action (for sticky).
+    ``num_slots`` = frame_skip at ``frame`` granularity (an independent draw per emulator frame)
+    or 1 at ``step`` granularity.  ``active`` (B,) bool switches corruption off per env (drift).
+
+    Returns (executed (B, num_slots) int32, corrupted (B, num_slots) bool) where ``corrupted``
+    marks the slots on which the channel fired (a replacement was drawn or the previous action
+    repeated; a uniform replacement may equal the intended action).
+    """
+    actions = jnp.asarray(actions, jnp.int32)
+    prev_executed = jnp.asarray(prev_executed, jnp.int32)
+
+    def one_env(key, action, prev):
+        k_fire, k_choice = jax.random.split(key)
+        fire = jax.random.uniform(k_fire, (num_slots,)) < prob
+        if sticky:
+            # executed[f] = executed[f-1] if fire[f] else action  => repeats `prev` only while
+            # every slot so far fired, afterwards it repeats `action` itself.
+            stuck = jnp.cumprod(fire.astype(jnp.int32)).astype(bool)
+            executed = jnp.where(stuck, prev, action)
+        else:
+            table = jnp.asarray(replacement, jnp.int32)
+            choice = table[jax.random.randint(k_choice, (num_slots,), 0, table.shape[0])]
+            executed = jnp.where(fire, choice, action)
+        return executed, fire
+
+    executed, fired = jax.vmap(one_env)(keys, actions, prev_executed)
+    if active is not None:
+        on = jnp.asarray(active, bool)[:, None]
+        executed = jnp.where(on, executed, actions[:, None])
+        fired = fired & on
+    return executed.astype(jnp.int32), fired

@@ -1,0 +1,11 @@
+"""Type 0: named state variables read from the RAM."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+
+def extract_labels(game, ram) -> dict:
+    """{label: (B,) int32} from ram (B, 128) for ``game`` (a GameSpec)."""
+    ram = jnp.asarray(ram).astype(jnp.int32)
+    return {name: jnp.asarray(fn(ram), jnp.int32) for name, fn in game.labels.items()}

@@ -1,0 +1,69 @@
+"""Type 3.2 screen masks: crop (halves and torch) and blackout of a game's regions."""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from stori_jax.games.base import SCREEN_HEIGHT, SCREEN_WIDTH, Region
+
+TORCH_RADIUS = 75
+CROP_REGIONS = {  # crop modes 1..4, fill black
+    1: (Region(0, 79, 0, SCREEN_HEIGHT - 1),),
+    2: (Region(80, SCREEN_WIDTH - 1, 0, SCREEN_HEIGHT - 1),),
+    3: (Region(0, SCREEN_WIDTH - 1, 0, 104),),
+    4: (Region(0, SCREEN_WIDTH - 1, 105, SCREEN_HEIGHT - 1),),
+}
+TORCH_MODE = 5
+
+
+def region_mask(regions: Sequence[Region]) -> tuple[np.ndarray, np.ndarray]:
+    """Static (hidden (210, 160) bool, fill (210, 160, 3) uint8), regions painted in order."""
+    hidden = np.zeros((SCREEN_HEIGHT, SCREEN_WIDTH), bool)
+    fill = np.zeros((SCREEN_HEIGHT, SCREEN_WIDTH, 3), np.uint8)
+    for r in regions:
+        hidden[r.y0:r.y1 + 1, r.x0:r.x1 + 1] = True
+        fill[r.y0:r.y1 + 1, r.x0:r.x1 + 1] = r.fill
+    return hidden, fill
+
+
+def torch_mask(centres: jax.Array) -> jax.Array:
+    """hidden (..., 210, 160) bool: pixels farther than 75 from centre (x, y) (int32 (..., 2))."""
+    cx = centres[..., 0, None, None]
+    cy = centres[..., 1, None, None]
+    ys = jnp.arange(SCREEN_HEIGHT, dtype=jnp.int32)[:, None]
+    xs = jnp.arange(SCREEN_WIDTH, dtype=jnp.int32)[None, :]
+    return (xs - cx) ** 2 + (ys - cy) ** 2 > TORCH_RADIUS ** 2
+
+
+def draw_mask_decisions(keys: jax.Array, *, prob: float, per_frame: bool, torch: bool):
+    """Per env, for the two screens that make an observation: apply? (B, 2) bool and torch
+    centres (B, 2, 2) int32 (x in [0,160), y in [0,210)).  At step granularity
+    (``per_frame=False``) one draw covers both screens."""
+    n = 2 if per_frame else 1
+
+    def one_env(key):
+        k_apply, k_x, k_y = jax.random.split(key, 3)
+        apply = jax.random.uniform(k_apply, (n,)) < prob
+        cx = jax.random.randint(k_x, (n,), 0, SCREEN_WIDTH)
+        cy = jax.random.randint(k_y, (n,), 0, SCREEN_HEIGHT)
+        centres = jnp.stack([cx, cy], axis=-1)
+        if n == 1:
+            apply, centres = jnp.repeat(apply, 2, 0), jnp.repeat(centres, 2, 0)
+        return apply, centres if torch else jnp.zeros_like(centres)
+
+    return jax.vmap(one_env)(keys)
+
+
+def apply_masks(frames: jax.Array, apply: jax.Array, *, hidden: np.ndarray | None = None,
+                fill: np.ndarray | None = None, centres: jax.Array | None = None) -> jax.Array:
+    """Mask frames (B, 2, 210, 160, 3) where ``apply`` (B, 2): either the static ``hidden``
+    region with ``fill``, or the torch at ``centres`` (B, 2, 2) (everything outside black)."""
+    if centres is not None:
+        pixel_hidden = torch_mask(centres) & apply[:, :, None, None]
+        return jnp.where(pixel_hidden[..., None], jnp.uint8(0), frames)
+    pixel_hidden = jnp.asarray(hidden)[None, None] & apply[:, :, None, None]
+    return jnp.where(pixel_hidden[..., None], jnp.asarray(fill)[None, None], frames)

@@ -1,0 +1,168 @@
+"""The shape of a game's facts: regions, mode tables, event rules and labels.
+
+Everything here is plain Python/numpy (no JAX): the emulator workers import it.
+
+Event rules are plain functions over RAM arrays (``np.uint8``, shape (128,)) and uniforms; they
+return the RAM bytes to write and what happened.  The worker runs them per emulator frame (or once
+per agent step at ``step`` granularity) and applies the writes with ``ALEInterface.setRAM``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Mapping
+
+import numpy as np
+
+SCREEN_HEIGHT, SCREEN_WIDTH = 210, 160
+BLACK = (0, 0, 0)
+
+RamWrites = dict  # {address: value}
+
+
+@dataclass(frozen=True)
+class Region:
+    """A screen rectangle, INCLUSIVE on both ends: columns x0..x1, rows y0..y1, and its fill."""
+
+    x0: int
+    x1: int
+    y0: int
+    y1: int
+    fill: tuple[int, int, int] = BLACK
+
+    def __post_init__(self):
+        if not (0 <= self.x0 <= self.x1 < SCREEN_WIDTH and 0 <= self.y0 <= self.y1 < SCREEN_HEIGHT):
+            raise ValueError(f"region out of the 160x210 screen: {self}")
+
+    def with_fill(self, fill: tuple[int, int, int]) -> "Region":
+        return Region(self.x0, self.x1, self.y0, self.y1, fill)
+
+
+@dataclass
+class EventOutcome:
+    """What a post-frame rule did: RAM writes, whether it fired, and the reward consequences."""
+
+    writes: RamWrites = field(default_factory=dict)
+    fired: bool = False
+    zero_reward: bool = False  # set the reward of this frame (or step) to 0
+    cancel_next_reward: bool = False  # ALE will report minus this reward next frame: remove it
+
+
+NO_EVENT = EventOutcome()
+
+
+@dataclass(frozen=True)
+class EventRule:
+    """A 2.1 event mode.
+
+    ``pre_frame(start_ram, state, u, p, decide) -> (writes, fired)`` runs before every emulator
+    frame; ``decide`` is False on the frames of a step after the first at ``step`` granularity
+    (the rule must then only re-apply its standing effect).
+    ``post_frame(prev_ram, ram, start_ram, state, u, u_choice, p, episode_frame) -> EventOutcome``
+    runs after the frame (``prev_ram`` = RAM just before the frame, or before the step at ``step``
+    granularity).  ``state`` is a per-episode dict made by ``new_state()``.
+    """
+
+    name: str
+    pre_frame: Callable | None = None
+    post_frame: Callable | None = None
+    new_state: Callable[[], dict] = dict
+
+
+@dataclass(frozen=True)
+class BlackoutMode:
+    name: str
+    regions: tuple[Region, ...]  # painted in order (later regions overwrite earlier ones)
+
+
+@dataclass(frozen=True)
+class RamObsMode:
+    """``writes(ram) -> {address: value}`` or ``None`` when its condition is not met (skip)."""
+
+    name: str
+    writes: Callable[[np.ndarray], RamWrites | None]
+
+
+@dataclass(frozen=True)
+class GameSpec:
+    """Every STORI fact about one game, in one place."""
+
+    name: str
+    rom_id: str
+    num_actions: int
+    regions: Mapping[str, Region] = field(default_factory=dict)
+    blackout_modes: Mapping[int, BlackoutMode] = field(default_factory=dict)
+    ram_obs_modes: Mapping[int, RamObsMode] = field(default_factory=dict)
+    event_modes: Mapping[int, EventRule] = field(default_factory=dict)
+    # name -> f(ram_int32[..., 128]) -> value; works on numpy and jax arrays alike
+    labels: Mapping[str, Callable] = field(default_factory=dict)
+    default_replacement_actions: tuple[int, ...] | None = None
+
+    # -- validation --------------------------------------------------------------------------
+
+    def validate(self, config) -> None:
+        """Raise ValueError if ``config`` uses a mode or action this game does not have."""
+        configs = [("Config", config)]
+        if config.drift is not None:
+            configs.append(("Config.drift.secondary", config.drift.secondary))
+        for where, cfg in configs:
+            if cfg.event is not None:
+                self._check_mode(f"{where}.event.mode", cfg.event.mode, self.event_modes,
+                                 "event modes")
+            mask = cfg.observation
+            if mask is not None and mask.kind == "blackout":
+                self._check_mode(f"{where}.observation.mode", mask.mode, self.blackout_modes,
+                                 "blackout modes")
+            if mask is not None and mask.kind == "ram":
+                self._check_mode(f"{where}.observation.mode", mask.mode, self.ram_obs_modes,
+                                 "RAM observation modes")
+            noise = cfg.action_noise
+            if noise is not None and noise.replacement_actions is not None:
+                bad = [a for a in noise.replacement_actions if a >= self.num_actions]
+                if bad:
+                    raise ValueError(f"{where}.action_noise.replacement_actions {bad} out of range: "
+                                     f"{self.name} has actions 0..{self.num_actions - 1}")
+
+    def _check_mode(self, field_name: str, mode: int, table: Mapping, what: str) -> None:
+        if mode not in table:
+            allowed = sorted(table)
+            raise ValueError(f"{field_name} {mode} is not one of {self.name}'s {what}: "
+                             f"allowed {allowed}" if allowed else
+                             f"{field_name}: {self.name} has no {what} (it is not a STORI game; "
+                             "only game-agnostic modes work: type 1, crop, drift)")
+
+    def replacement_actions(self, noise) -> tuple[int, ...]:
+        if noise.replacement_actions is not None:
+            return noise.replacement_actions
+        if self.default_replacement_actions is not None:
+            return self.default_replacement_actions
+        return tuple(range(self.num_actions))
+
+
+# -- small helpers shared by the game modules -------------------------------------------------
+
+def bcd(value):
+    """Binary-coded decimal byte -> int (numpy or jax int arrays)."""
+    return (value >> 4) * 10 + (value & 15)
+
+
+def full_width(y0: int, y1: int, fill=BLACK) -> Region:
+    return Region(0, SCREEN_WIDTH - 1, y0, y1, fill)
+
+
+def blackout_table(regions: Mapping[str, Region],
+                   modes: Mapping[int, tuple[str, tuple[str, ...]]]) -> dict[int, BlackoutMode]:
+    """Build {mode: BlackoutMode} from {mode: (description, region names in paint order)}."""
+    return {mode: BlackoutMode(name, tuple(regions[r] for r in names))
+            for mode, (name, names) in modes.items()}
+
+
+def changed(prev_ram: np.ndarray, ram: np.ndarray, addresses) -> np.ndarray:
+    """The addresses (from ``addresses``) whose byte differs between the two RAMs."""
+    addresses = np.asarray(addresses)
+    return addresses[prev_ram[addresses] != ram[addresses]]
+
+
+def pick(items, u_choice: float):
+    """One of ``items`` chosen uniformly by a uniform draw in [0, 1)."""
+    return items[min(int(u_choice * len(items)), len(items) - 1)]

@@ -1,0 +1,92 @@
+"""A Config compiled against a game and the env's settings into the static facts the jitted
+functions and the workers need (hashable, so it can be a static argument of ``jax.jit``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from stori_jax.config import ActionNoise, Config, ObservationMask, RandomEvent
+from stori_jax.games.base import GameSpec
+
+OBS_KINDS = ("raw", "atari84", "dreamer64", "ram")
+
+
+@dataclass(frozen=True)
+class NoisePlan:
+    prob: float
+    replacement: tuple[int, ...]
+    sticky: bool
+    under_drift: bool
+
+
+@dataclass(frozen=True)
+class EventPlan:
+    mode: int
+    prob: float
+    under_drift: bool
+
+
+@dataclass(frozen=True)
+class MaskPlan:
+    kind: str  # crop | blackout | ram
+    mode: int
+    prob: float
+    under_drift: bool
+
+    @property
+    def torch(self) -> bool:
+        from stori_jax.functional.masks import TORCH_MODE
+
+        return self.kind == "crop" and self.mode == TORCH_MODE
+
+
+@dataclass(frozen=True)
+class Plan:
+    game: str
+    num_envs: int
+    num_actions: int
+    frame_skip: int
+    per_frame: bool
+    obs: str
+    noop_max: int
+    autoreset: bool
+    noise: NoisePlan | None = None
+    event: EventPlan | None = None
+    mask: MaskPlan | None = None
+    drift_schedule: str | None = None
+    drift_period: int = 0
+
+    @property
+    def num_slots(self) -> int:
+        """Independent draws per agent step: one per emulator frame, or one per step."""
+        return self.frame_skip if self.per_frame else 1
+
+    def static_mask(self, game: GameSpec) -> tuple[np.ndarray, np.ndarray]:
+        """(hidden, fill) of a crop-half or blackout mask."""
+        from stori_jax.functional.masks import CROP_REGIONS, region_mask
+
+        if self.mask.kind == "crop":
+            return region_mask(CROP_REGIONS[self.mask.mode])
+        return region_mask(game.blackout_modes[self.mask.mode].regions)
+
+
+def compile_plan(config: Config, game: GameSpec, *, num_envs: int, frame_skip: int, obs: str,
+                 noop_max: int, autoreset: bool = True) -> Plan:
+    game.validate(config)
+    parts = {"noise": None, "event": None, "mask": None}
+    for name, part, under_drift in config.components():
+        if isinstance(part, ActionNoise):
+            parts["noise"] = NoisePlan(part.prob, game.replacement_actions(part), part.sticky,
+                                       under_drift)
+        elif isinstance(part, RandomEvent):
+            parts["event"] = EventPlan(part.mode, part.prob, under_drift)
+        elif isinstance(part, ObservationMask):
+            parts["mask"] = MaskPlan(part.kind, part.mode, part.prob, under_drift)
+    drift = config.drift
+    return Plan(game=game.name, num_envs=num_envs, num_actions=game.num_actions,
+                frame_skip=frame_skip, per_frame=config.granularity == "frame", obs=obs,
+                noop_max=noop_max, autoreset=autoreset, **parts,
+                drift_schedule=drift.schedule if drift else None,
+                drift_period=drift.period if drift else 0)

@@ -1,0 +1,44 @@
+"""Batched rollouts of a JAX policy: ``rollout(env, policy_fn, params, key, num_steps)``."""
+
+from __future__ import annotations
+
+from typing import Any, Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+
+class Trajectory(NamedTuple):
+    """Stacked over time: every leaf has a leading (T, B) shape; ``last_obs`` is (B, ...)."""
+
+    obs: jax.Array          # the observation each action was chosen from
+    action: jax.Array
+    reward: jax.Array
+    terminated: jax.Array
+    truncated: jax.Array
+    info: dict
+    last_obs: jax.Array     # the observation after the final step
+
+
+def rollout(env, policy_fn: Callable[[Any, jax.Array, jax.Array], jax.Array], params,
+            key: jax.Array, num_steps: int, *, obs: jax.Array | None = None) -> Trajectory:
+    """Run ``num_steps`` agent steps of ``env`` under ``policy_fn(params, obs, key) -> (B,)``.
+
+    Starts from ``obs`` when given (continuing a run), else resets the env.  The policy is jitted
+    here; its randomness comes from ``key`` (split once per step), so the same key, params and
+    env seed give the same trajectory.
+    """
+    if not isinstance(num_steps, int) or num_steps < 1:
+        raise ValueError(f"num_steps must be an int >= 1, got {num_steps!r}")
+    policy = jax.jit(policy_fn)
+    if obs is None:
+        obs, _ = env.reset()
+    steps = []
+    for _ in range(num_steps):
+        key, step_key = jax.random.split(key)
+        actions = policy(params, obs, step_key)
+        next_obs, reward, terminated, truncated, info = env.step(actions)
+        steps.append((obs, actions, reward, terminated, truncated, info))
+        obs = next_obs
+    stacked = jax.tree.map(lambda *xs: jnp.stack(xs), *steps)
+    return Trajectory(*stacked, last_obs=obs)
