@@ -31,6 +31,21 @@ __all__ = ["ActionNoise", "Config", "ConceptDrift", "ObservationMask", "RandomEv
            *_LAZY]
 
 
+def _register_gymnasium_ids() -> None:
+    """Register ``stori_jax/<Game>-<preset>-v0`` with gymnasium, except inside emulator workers
+    (spawned children that never need it and should start fast)."""
+    import multiprocessing
+    import sys
+
+    if multiprocessing.parent_process() is None or "gymnasium" in sys.modules:
+        from stori_jax.gym_adapter import register_all
+
+        register_all()
+
+
+_register_gymnasium_ids()
+
+
 def __getattr__(name):
     if name in _LAZY:
         import importlib

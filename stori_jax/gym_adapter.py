@@ -1,0 +1,120 @@
+"""Gymnasium adapter: ids ``stori_jax/<Game>-<preset>-v0`` for ``gymnasium.make`` (one env,
+numpy) and ``gymnasium.make_vec`` (a gymnasium VectorEnv, autoreset mode NEXT_STEP).
+
+    import gymnasium as gym, stori_jax
+    env = gym.make("stori_jax/Breakout-2.1-v0")
+    envs = gym.make_vec("stori_jax/Breakout-2.1-v0", num_envs=8)
+
+Extra keyword arguments (``obs``, ``frame_skip``, ``granularity``, ``num_workers``,
+``max_episode_frames``, ``noop_max``, ``config``) go to :func:`stori_jax.make`.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv
+
+NAMESPACE = "stori_jax"
+
+
+def env_id(game: str, preset: str) -> str:
+    return f"{NAMESPACE}/{game}-{preset}-v0"
+
+
+def _numpy_info(info: dict) -> dict:
+    import jax
+
+    return jax.tree.map(np.asarray, info)
+
+
+class _Owner:
+    """Holds one stori_jax Env and re-makes it when reset() asks for another seed."""
+
+    def _init_env(self, game, preset, num_envs, seed, make_kwargs):
+        import stori_jax
+
+        self._make = lambda s: stori_jax.make(game, preset, num_envs=num_envs, seed=s,
+                                              autoreset=False, **make_kwargs)
+        self._seed = 0 if seed is None else seed
+        self._env = self._make(self._seed)
+        self._fresh = True  # no reset yet: the env is exactly as made from self._seed
+
+    def _reseed(self, seed):
+        """An explicit seed restarts everything (emulators and key) from that seed."""
+        if seed is not None and not (self._fresh and seed == self._seed):
+            self._env.close()
+            self._seed = seed
+            self._env = self._make(seed)
+        self._fresh = False
+
+    def close(self, **kwargs):
+        if getattr(self, "_env", None) is not None:
+            self._env.close()
+
+
+class StoriGymEnv(_Owner, gym.Env):
+    """One STORI env with gymnasium's single-env API (numpy outputs, no autoreset)."""
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, game: str, preset: str | None = None, seed: int | None = None,
+                 **make_kwargs):
+        self._init_env(game, preset, 1, seed, make_kwargs)
+        self.observation_space = self._env.single_observation_space
+        self.action_space = self._env.single_action_space
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        self._reseed(seed)
+        obs, info = self._env.reset()
+        return np.asarray(obs[0]), {k: v[0] for k, v in _numpy_info(info).items()
+                                    if not isinstance(v, dict)}
+
+    def step(self, action):
+        a = np.asarray(action)
+        if a.shape != () or not np.issubdtype(a.dtype, np.integer) or not 0 <= a < self.action_space.n:
+            raise ValueError(f"action must be one int in [0, {self.action_space.n - 1}], "
+                             f"got {action!r}")
+        obs, reward, terminated, truncated, info = self._env.step(a.reshape(1))
+        info = {k: v[0] for k, v in _numpy_info(info).items() if not isinstance(v, dict)}
+        return (np.asarray(obs[0]), float(reward[0]), bool(terminated[0]), bool(truncated[0]),
+                info)
+
+
+class StoriVectorEnv(_Owner, VectorEnv):
+    """B STORI envs as a gymnasium VectorEnv (numpy, autoreset mode NEXT_STEP)."""
+
+    metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(self, num_envs: int, game: str, preset: str | None = None,
+                 seed: int | None = None, **make_kwargs):
+        self._init_env(game, preset, num_envs, seed, make_kwargs)
+        self.num_envs = num_envs
+        self.single_observation_space = self._env.single_observation_space
+        self.single_action_space = self._env.single_action_space
+        self.observation_space = self._env.observation_space
+        self.action_space = self._env.action_space
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        self._reseed(seed)
+        obs, info = self._env.reset()
+        return np.asarray(obs), _numpy_info(info)
+
+    def step(self, actions):
+        obs, reward, terminated, truncated, info = self._env.step(actions)
+        return (np.asarray(obs), np.asarray(reward), np.asarray(terminated),
+                np.asarray(truncated), _numpy_info(info))
+
+
+def register_all() -> None:
+    """Register every paper preset (idempotent)."""
+    from stori_jax.presets import list_presets
+
+    for game, preset in list_presets():
+        gid = env_id(game, preset)
+        if gid in gym.registry:
+            continue
+        gym.register(id=gid, entry_point="stori_jax.gym_adapter:StoriGymEnv",
+                     vector_entry_point="stori_jax.gym_adapter:StoriVectorEnv",
+                     kwargs={"game": game, "preset": preset})

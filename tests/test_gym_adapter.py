@@ -1,0 +1,75 @@
+"""The gymnasium adapter: registered ids, single-env and vector APIs, NEXT_STEP autoreset."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import stori_jax
+from stori_jax.gym_adapter import env_id
+
+
+def test_every_preset_is_registered():
+    for game, name in stori_jax.list_presets():
+        assert env_id(game, name) in gym.registry
+
+
+def test_single_env_follows_gymnasium_api():
+    env = gym.make("stori_jax/Gopher-3.2-v0")
+    try:
+        check_env(env.unwrapped, skip_render_check=True)
+        obs, info = env.reset(seed=5)
+        assert obs.shape == (84, 84, 4) and obs.dtype == np.uint8
+        obs, reward, terminated, truncated, info = env.step(0)
+        assert isinstance(reward, float) and isinstance(terminated, bool)
+        assert env.observation_space.contains(obs)
+        with pytest.raises(ValueError, match=r"action must be one int in \[0, 7\]"):
+            env.step(8)
+        with pytest.raises(ValueError, match="action must be one int"):
+            env.step(0.5)
+    finally:
+        env.close()
+
+
+def test_single_env_reset_seed_reproduces_the_run():
+    env = gym.make("stori_jax/Breakout-1-v0", obs="ram")
+    try:
+        runs = []
+        for _ in range(2):
+            obs, _ = env.reset(seed=11)
+            trace = [obs]
+            for t in range(30):
+                obs, *_ = env.step(t % 4)
+                trace.append(obs)
+            runs.append(np.stack(trace))
+        np.testing.assert_array_equal(runs[0], runs[1])
+        env.reset(seed=12)
+        other = np.stack([env.step(t % 4)[0] for t in range(30)])
+        assert not np.array_equal(other, runs[0][1:])
+    finally:
+        env.close()
+
+
+def test_vector_env_next_step_autoreset():
+    envs = gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, obs="ram", frame_skip=4)
+    try:
+        assert envs.metadata["autoreset_mode"] == gym.vector.AutoresetMode.NEXT_STEP
+        obs, info = envs.reset(seed=0)
+        assert obs.shape == (2, 128)
+        first_ram = obs.copy()
+        rng = np.random.default_rng(0)
+        done_at = None
+        for t in range(3000):
+            obs, reward, terminated, truncated, info = envs.step(rng.integers(0, 4, 2))
+            if done_at is not None:
+                # the step after an episode end is the reset step: reward 0, not terminated
+                assert reward[done_env] == 0 and not terminated[done_env]
+                assert info["reset_step"][done_env]
+                # a reset without no-ops starts from the same RAM as the first reset
+                np.testing.assert_array_equal(obs[done_env], first_ram[done_env])
+                break
+            if (terminated | truncated).any():
+                done_at, done_env = t, int(np.flatnonzero(terminated | truncated)[0])
+        assert done_at is not None, "no Breakout episode ended under random play"
+    finally:
+        envs.close()
