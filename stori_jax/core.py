@@ -127,28 +127,35 @@ def after_step(plan: Plan, state: EnvState, draws: Draws, frames, ram, ram_rende
     ``new_episode`` (B,) bool marks envs whose observation is the first of an episode."""
     game = get_game(plan.game)
     masked = jnp.zeros((plan.num_envs,), bool)
+    pair = plan.frames_layout == "pair"
     if plan.mask is not None and plan.mask.kind != "ram" and plan.obs != "ram":
         m = plan.mask
         reset_on = not m.under_drift
         gate = jnp.where(new_episode, reset_on, draws.step_active)
-        apply = draws.mask_apply & gate[:, None]
+        # a pooled screen gets one decision per step (the backend pools only when that is exact)
+        apply = (draws.mask_apply if pair else draws.mask_apply[:, :1]) & gate[:, None]
+        screens = frames if pair else F.pool_screens(frames, plan.frames_layout)[:, None]
         if m.torch:
-            frames = F.apply_masks(frames, apply, centres=draws.mask_centres)
+            centres = draws.mask_centres if pair else draws.mask_centres[:, :1]
+            screens = F.apply_masks(screens, apply, centres=centres)
         else:
             hidden, fill = plan.static_mask(game)
-            frames = F.apply_masks(frames, apply, hidden=hidden, fill=fill)
+            screens = F.apply_masks(screens, apply, hidden=hidden, fill=fill)
+        screen = F.max_pool(screens) if pair else screens[:, 0]
         masked = apply.any(axis=1)
-    elif plan.mask is not None and plan.mask.kind == "ram":
-        masked = ram_rendered != 0
+    else:
+        if plan.mask is not None and plan.mask.kind == "ram":
+            masked = ram_rendered != 0
+        screen = F.pool_screens(frames, plan.frames_layout) if plan.obs != "ram" else None
 
     stack = state.stack
     if plan.obs == "raw":
-        obs = F.max_pool(frames)
+        obs = screen
     elif plan.obs == "atari84":
-        stack = F.push_frame(state.stack, F.atari84_frame(frames), new_episode)
+        stack = F.push_frame(state.stack, F.atari84_frame(screen), new_episode)
         obs = stack
     elif plan.obs == "dreamer64":
-        obs = F.dreamer64(frames)
+        obs = F.dreamer64(screen)
     else:
         obs = jnp.asarray(ram) + jnp.uint8(0)
     labels = F.extract_labels(game, ram)

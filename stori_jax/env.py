@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import numbers
 
 import gymnasium as gym
@@ -84,9 +85,11 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
     plan = compile_plan(cfg, spec, num_envs=num_envs, frame_skip=frame_skip, obs=obs,
                         noop_max=noop_max, autoreset=bool(autoreset))
     if backend == "envpool":
-        from envpool_bridge import make_envpool_backend  # raises a clear error if unsupported
+        from envpool_bridge import FRAMES_LAYOUT, make_envpool_backend
 
-        return Env(plan, cfg, seed, make_envpool_backend(plan, cfg, seed, max_episode_frames))
+        plan = dataclasses.replace(plan, frames_layout=FRAMES_LAYOUT)
+        # raises a clear ValueError naming what needs the subproc backend
+        return Env(plan, cfg, seed, make_envpool_backend(plan, seed, max_episode_frames))
     cores = _available_cores()
     if num_workers is None:
         num_workers = min(cores, num_envs)
@@ -94,6 +97,8 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
     if num_workers > num_envs:
         raise ValueError(f"num_workers must be <= num_envs ({num_envs}), got {num_workers}")
     wants_screens = obs != "ram"
+    pool_in_workers = wants_screens and not plan.needs_both_screens
+    plan = dataclasses.replace(plan, frames_layout="pooled" if pool_in_workers else "pair")
     event, mask = plan.event, plan.mask
     worker_backend = SubprocBackend(
         game=spec.name, seeds=emulator_seeds(seed, num_envs), num_workers=num_workers,
@@ -101,7 +106,7 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
         event_mode=event.mode if event else None, event_prob=event.prob if event else 0.0,
         ram_obs_mode=mask.mode if mask is not None and mask.kind == "ram" else None,
         want_screens=wants_screens, max_episode_frames=max_episode_frames,
-        autoreset=plan.autoreset)
+        autoreset=plan.autoreset, pool_screens=pool_in_workers)
     return Env(plan, cfg, seed, worker_backend)
 
 

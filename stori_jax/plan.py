@@ -57,6 +57,13 @@ class Plan:
     mask: MaskPlan | None = None
     drift_schedule: str | None = None
     drift_period: int = 0
+    frames_layout: str = "pair"  # how the backend delivers screens (see pool_screens)
+
+    @property
+    def needs_both_screens(self) -> bool:
+        """True when a crop/blackout mask is drawn per emulator frame: each of the last two
+        screens must be masked on its own before the max-pool."""
+        return (self.mask is not None and self.mask.kind != "ram" and self.per_frame)
 
     @property
     def num_slots(self) -> int:

@@ -59,18 +59,37 @@ def _mode(value) -> int:
     return int(text)
 
 
+def _probability(value) -> float:
+    if isinstance(value, bool):  # float(True) would silently read as 1.0
+        raise TypeError(value)
+    return float(value)
+
+
+def _count(value) -> int:
+    """An int, an integral float (300.0) or a string of digits; not a bool, and never a float
+    silently truncated (300.7)."""
+    if isinstance(value, bool):
+        raise TypeError(value)
+    if isinstance(value, float) and not value.is_integer():
+        raise ValueError(value)
+    if not isinstance(value, (int, float, str)):
+        raise TypeError(value)
+    return int(value)
+
+
 def _concept(kind: str, r: _Reader) -> Config:
     if kind == "1":
         return Config(action_noise=ActionNoise(
-            prob=r.get(f"{_ACTION}.stochastic_action_prob", float, "a probability")))
+            prob=r.get(f"{_ACTION}.stochastic_action_prob", _probability, "a probability")))
     if kind == "2.1":
         return Config(event=RandomEvent(
             mode=r.get(f"{_RANDOM}.mode", _mode, "an event mode ('1', '2', ...)"),
-            prob=r.get(f"{_RANDOM}.random_stochasticity_prob", float, "a probability")))
+            prob=r.get(f"{_RANDOM}.random_stochasticity_prob", _probability, "a probability")))
     if kind == "3.2":
         kind_ = r.get(f"{_OBS}.type", str, "'crop', 'blackout' or 'ram'")
         mode = r.get(f"{_OBS}.mode", _mode, "a mode ('1', '2', ...)")
-        prob = r.get(f"{_OBS}.prob", float, "a probability") if f"{_OBS}.prob" in r.flat else 1.0
+        prob = (r.get(f"{_OBS}.prob", _probability, "a probability")
+                if f"{_OBS}.prob" in r.flat else 1.0)
         return Config(observation=ObservationMask(kind=kind_, mode=mode, prob=prob))
     return Config()
 
@@ -90,7 +109,7 @@ def config_from_reference(d: Mapping[str, Any], game: str | None = None) -> Conf
                              f"{list(SECONDARY_TYPES)}, got {secondary_type!r}")
         config = Config(drift=ConceptDrift(
             schedule=r.get(f"{_DRIFT}.temporal_mode", str, "'sudden' or 'cyclic'"),
-            period=r.get(f"{_DRIFT}.temporal_threshold", int, "an int number of agent steps"),
+            period=r.get(f"{_DRIFT}.temporal_threshold", _count, "an int number of agent steps"),
             secondary=_concept(secondary_type, r)))
     else:
         config = _concept(kind, r)

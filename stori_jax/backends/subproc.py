@@ -83,11 +83,14 @@ def _shutdown(processes, conns) -> None:
 class SubprocBackend:
     """Owns the worker processes and the shared buffers of one batched env."""
 
+    frames_layout = "pair"  # or "pooled" (set in __init__)
+
     def __init__(self, *, game: str, seeds: list[int], num_workers: int, frame_skip: int,
                  per_frame: bool, event_mode: int | None, event_prob: float,
                  ram_obs_mode: int | None, want_screens: bool, max_episode_frames: int,
-                 autoreset: bool = True):
+                 autoreset: bool = True, pool_screens: bool = False):
         num_envs = len(seeds)
+        self.frames_layout = "pooled" if pool_screens else "pair"
         ctx = mp.get_context("spawn")
         self.buffers = SharedBuffers.allocate(ctx, num_envs, frame_skip)
         self.views = self.buffers.views()
@@ -99,7 +102,7 @@ class SubprocBackend:
                               frame_skip=frame_skip, per_frame=per_frame, event_mode=event_mode,
                               event_prob=event_prob, ram_obs_mode=ram_obs_mode,
                               want_screens=want_screens, max_episode_frames=max_episode_frames,
-                              autoreset=autoreset)
+                              autoreset=autoreset, pool_screens=pool_screens)
             parent_conn, child_conn = ctx.Pipe(duplex=True)
             process = ctx.Process(target=worker_main, daemon=True,
                                   args=(spec, self.buffers, child_conn, os.getpid()),
@@ -181,6 +184,8 @@ class SubprocBackend:
         if not self._pending:
             raise RuntimeError("nothing in flight: call send_step() or send_reset() first")
         self._wait_all("a step")
+        if self.frames_layout == "pooled":
+            return dict(self.views, frames=self.views["frames"][:, 0])
         return self.views
 
     def close(self) -> None:

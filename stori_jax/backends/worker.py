@@ -36,6 +36,7 @@ class WorkerSpec:
     want_screens: bool
     max_episode_frames: int
     autoreset: bool = True
+    pool_screens: bool = False  # max-pool the two screens into slot 0 here
 
 
 class Emulator:
@@ -85,9 +86,14 @@ class Emulator:
             for slot, bit in enumerate(RESET_RENDER_BITS):
                 if v["ram_render"][i] & bit and self.render_ram_obs(slot):
                     rendered |= 1 << slot
+            self.pool()
         ale.getRAM(self.ram)
         v["ram_rendered"][i] = rendered
         v["lives"][i] = ale.lives()
+
+    def pool(self) -> None:
+        if self.spec.pool_screens:
+            np.maximum(self.frames[0], self.frames[1], out=self.frames[0])
 
     def render_ram_obs(self, slot: int) -> bool:
         """Screen ``slot`` <- the next frame under NOOP of a RAM-modified copy of the game."""
@@ -176,6 +182,8 @@ class Emulator:
         if done and spec.autoreset:
             self.reset()  # autoreset: the observation is the next episode's first one
         else:
+            if spec.want_screens:
+                self.pool()
             v["ram_rendered"][i] = rendered
             ale.getRAM(self.ram)
             v["lives"][i] = ale.lives()

@@ -21,6 +21,9 @@ def corrupt_actions(keys: jax.Array, actions: jax.Array, prev_executed: jax.Arra
     marks the slots on which the channel fired (a replacement was drawn or the previous action
     repeated; a uniform replacement may equal the intended action).
     """
+    if not sticky and not replacement:
+        raise ValueError("corrupt_actions: replacement must be a non-empty sequence of action "
+                         "indices when sticky=False")
     actions = jnp.asarray(actions, jnp.int32)
     prev_executed = jnp.asarray(prev_executed, jnp.int32)
 

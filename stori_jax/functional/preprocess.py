@@ -1,7 +1,9 @@
 """Observation preprocessing: max-pool of the last two screens, grayscale, area resize, stack.
 
-Formulated for XLA on CPU: integer luma, static-index gathers with a few taps per output pixel
-(exact area interpolation, as OpenCV's INTER_AREA), fused elementwise work.
+The screen an agent sees is the elementwise max of the last two (masked) RGB screens; ``atari84``
+turns it to luma and area-resizes it, ``dreamer64`` area-resizes the RGB.  Formulated for XLA on
+CPU: integer arithmetic throughout (luma, exact area interpolation as OpenCV's INTER_AREA with
+a few static taps per output pixel), fused elementwise work.
 """
 
 from __future__ import annotations
@@ -29,21 +31,18 @@ def to_gray(rgb):
 
 @functools.lru_cache(maxsize=None)
 def area_taps(in_size: int, out_size: int) -> tuple[np.ndarray, np.ndarray]:
-    """(index (out, K) int32, weight (out, K) float32): output i averages the input interval
-    [i * in/out, (i + 1) * in/out), each input cell weighted by its overlap."""
-    scale = in_size / out_size
+    """(index (out, K) int32, weight (out, K) int32): output i averages the input interval
+    [i * in/out, (i + 1) * in/out); input cell j weighs its overlap with it, in units of 1/out,
+    so every weight is an integer and each row sums to ``in_size``."""
     rows = []
     for i in range(out_size):
-        lo, hi = i * scale, (i + 1) * scale
-        taps = []
-        for j in range(int(np.floor(lo)), int(np.ceil(hi))):
-            overlap = min(hi, j + 1) - max(lo, j)
-            if overlap > 1e-9:
-                taps.append((min(j, in_size - 1), overlap / scale))
-        rows.append(taps)
+        lo, hi = i * in_size, (i + 1) * in_size  # the interval, scaled by out_size
+        taps = [(j, min(hi, (j + 1) * out_size) - max(lo, j * out_size))
+                for j in range(lo // out_size, -(-hi // out_size))]
+        rows.append([(j, w) for j, w in taps if w > 0])
     k = max(len(t) for t in rows)
     index = np.zeros((out_size, k), np.int32)
-    weight = np.zeros((out_size, k), np.float32)
+    weight = np.zeros((out_size, k), np.int32)
     for i, taps in enumerate(rows):
         for t, (j, w) in enumerate(taps):
             index[i, t], weight[i, t] = j, w
@@ -57,23 +56,39 @@ def _resize_axis(x, axis: int, out_size: int):
     shape[axis] = out_size
     out = None
     for t in range(index.shape[1]):
-        term = jnp.take(x, jnp.asarray(index[:, t]), axis=axis) * weight[:, t].reshape(shape)
+        term = jnp.take(x, jnp.asarray(index[:, t]), axis=axis) * jnp.asarray(
+            weight[:, t].reshape(shape))
         out = term if out is None else out + term
     return out
 
 
 def area_resize(image, height: int, width: int, *, y_axis: int, x_axis: int):
-    """Exact area-average resize of uint8 images along (y_axis, x_axis); returns uint8."""
-    x = image.astype(jnp.float32)
+    """Exact area-average resize of uint8 images along (y_axis, x_axis), in integer arithmetic
+    (bit-identical on every machine); rounds half up; returns uint8."""
+    in_h, in_w = image.shape[y_axis], image.shape[x_axis]
+    x = image.astype(jnp.int32)  # sums stay below 255 * in_h * in_w < 2**31
     x = _resize_axis(x, y_axis, height)
     x = _resize_axis(x, x_axis, width)
-    return jnp.clip(jnp.round(x), 0, 255).astype(jnp.uint8)
+    denominator = in_h * in_w
+    return ((x + denominator // 2) // denominator).astype(jnp.uint8)
 
 
-def atari84_frame(frames):
-    """(B, 2, 210, 160, 3) uint8 -> (B, 84, 84) uint8: gray each screen, max-pool, area resize."""
-    gray = max_pool(to_gray(frames))
-    return area_resize(gray, ATARI84, ATARI84, y_axis=1, x_axis=2)
+def pool_screens(frames, layout: str = "pair"):
+    """The observed screen (B, 210, 160, 3) from a backend's frames: ``pair`` (B, 2, H, W, 3)
+    is max-pooled here, ``pooled`` (B, H, W, 3) was pooled by the backend, ``pooled_chw``
+    (B, 3, H, W) is transposed."""
+    if layout == "pair":
+        return max_pool(frames)
+    if layout == "pooled":
+        return frames
+    if layout == "pooled_chw":
+        return jnp.moveaxis(frames, 1, -1)
+    raise ValueError(f"frames layout must be one of ['pair', 'pooled', 'pooled_chw'], got {layout!r}")
+
+
+def atari84_frame(screen):
+    """(B, 210, 160, 3) uint8 max-pooled screen -> (B, 84, 84) uint8: luma, area resize."""
+    return area_resize(to_gray(screen), ATARI84, ATARI84, y_axis=1, x_axis=2)
 
 
 def reset_stack(frame):
@@ -88,6 +103,6 @@ def push_frame(stack, frame, new_episode):
     return jnp.where(new_episode[:, None, None, None], reset_stack(frame), pushed)
 
 
-def dreamer64(frames):
-    """(B, 2, 210, 160, 3) uint8 -> (B, 64, 64, 3) uint8: max-pool, area resize RGB."""
-    return area_resize(max_pool(frames), DREAMER64, DREAMER64, y_axis=1, x_axis=2)
+def dreamer64(screen):
+    """(B, 210, 160, 3) uint8 max-pooled screen -> (B, 64, 64, 3) uint8: area resize RGB."""
+    return area_resize(screen, DREAMER64, DREAMER64, y_axis=1, x_axis=2)

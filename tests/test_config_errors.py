@@ -1,0 +1,371 @@
+"""Every bad input raises ValueError, and the message names the field and the allowed values."""
+
+from __future__ import annotations
+
+import math
+import re
+
+import pytest
+
+from stori_jax import (ActionNoise, Config, ConceptDrift, ObservationMask, RandomEvent,
+                       get_game, preset)
+
+STORI = "['Breakout', 'Boxing', 'Gopher', 'BankHeist']"
+SPEC_MODE_COUNTS = {  # blackout, RAM, event modes (STORI_SPEC sections 5-8)
+    "Breakout": (11, 2, 3), "Boxing": (9, 3, 3), "Gopher": (18, 5, 3), "BankHeist": (10, 6, 4),
+}
+SECONDARY = re.escape("['1', '2.1', '3.2']")
+PROB = re.escape("[0, 1]")
+
+
+def allowed(n):
+    return re.escape(str(list(range(1, n + 1))))
+
+
+# -- games -------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", ["Pacman2000", "breakout2", "Bank Heist"])
+def test_unknown_game(name):
+    msg = rf"unknown game '{re.escape(name)}': allowed are the STORI games {re.escape(STORI)}"
+    with pytest.raises(ValueError, match=msg):
+        get_game(name)
+    with pytest.raises(ValueError, match=msg):
+        Config(game=name)
+    with pytest.raises(ValueError, match=msg):
+        preset("Breakout", "1").for_game(name)
+
+
+@pytest.mark.parametrize("name", ["", None, 3])
+def test_game_not_a_string(name):
+    with pytest.raises(ValueError, match=r"game must be a non-empty string"):
+        get_game(name)
+
+
+def test_game_aliases():
+    assert get_game("bank_heist") is get_game("BankHeist") is get_game("bankheist")
+    assert get_game("Pong").num_actions == 6  # any ale-py game: game-agnostic modes only
+
+
+# -- game-specific modes -----------------------------------------------------------------------
+
+@pytest.mark.parametrize("game", list(SPEC_MODE_COUNTS))
+def test_unknown_blackout_ram_event_mode(game):
+    n_blackout, n_ram, n_event = SPEC_MODE_COUNTS[game]
+    for kind, n, what in (("blackout", n_blackout, "blackout modes"),
+                          ("ram", n_ram, "RAM observation modes")):
+        config = Config(observation=ObservationMask(kind, n + 1))
+        for mode in (n, 1):  # the last and the first mode are fine
+            Config(observation=ObservationMask(kind, mode), game=game)
+        msg = (rf"Config\.observation\.mode {n + 1} is not one of {game}'s {what}: "
+               rf"allowed {allowed(n)}")
+        with pytest.raises(ValueError, match=msg):
+            config.for_game(game)
+        with pytest.raises(ValueError, match=msg):
+            get_game(game).validate(config)
+        drifted = Config(drift=ConceptDrift("sudden", 5, config))
+        with pytest.raises(ValueError, match=r"Config\.drift\.secondary\.observation\.mode "
+                                             rf"{n + 1} is not one of {game}'s {what}: "
+                                             rf"allowed {allowed(n)}"):
+            drifted.for_game(game)
+        with pytest.raises(ValueError, match=rf"ObservationMask\.mode must be >= 1 for kind "
+                                             rf"'{kind}', got 0"):
+            ObservationMask(kind, 0)
+    Config(event=RandomEvent(n_event, 0.1), game=game)
+    with pytest.raises(ValueError, match=rf"Config\.event\.mode {n_event + 1} is not one of "
+                                         rf"{game}'s event modes: allowed {allowed(n_event)}"):
+        Config(event=RandomEvent(n_event + 1, 0.1), game=game)
+    with pytest.raises(ValueError, match=r"Config\.drift\.secondary\.event\.mode"):
+        Config(drift=ConceptDrift("cyclic", 5, Config(event=RandomEvent(n_event + 1, 0.1))),
+               game=game)
+    with pytest.raises(ValueError, match=r"RandomEvent\.mode must be >= 1"):
+        RandomEvent(0, 0.1)
+
+
+def test_modes_on_a_non_stori_game():
+    Config(observation=ObservationMask("crop", 5), game="Pong")
+    Config(action_noise=ActionNoise(0.3), game="Pong")
+    with pytest.raises(ValueError, match=r"Config\.observation\.mode: Pong has no blackout modes"):
+        Config(observation=ObservationMask("blackout", 1), game="Pong")
+    with pytest.raises(ValueError, match=r"Config\.event\.mode: Pong has no event modes"):
+        Config(event=RandomEvent(1, 0.5), game="Pong")
+
+
+@pytest.mark.parametrize("mode", [6, 0, -1])
+def test_unknown_crop_mode(mode):
+    with pytest.raises(ValueError, match=r"ObservationMask\.mode \(crop\) must be one of "
+                                         rf"{re.escape('[1, 2, 3, 4, 5]')}, got {mode}"):
+        ObservationMask("crop", mode)
+
+
+@pytest.mark.parametrize("mode", ["1", 1.0, True, None])
+def test_mode_not_an_int(mode):
+    with pytest.raises(ValueError, match=r"ObservationMask\.mode must be an int"):
+        ObservationMask("blackout", mode)
+    with pytest.raises(ValueError, match=r"RandomEvent\.mode must be an int"):
+        RandomEvent(mode, 0.5)
+
+
+@pytest.mark.parametrize("kind", ["hide", "Crop", "", None])
+def test_unknown_kind(kind):
+    with pytest.raises(ValueError, match=r"ObservationMask\.kind must be one of "
+                                         rf"{re.escape(str(['crop', 'blackout', 'ram']))}, "
+                                         rf"got {re.escape(repr(kind))}"):
+        ObservationMask(kind, 1)
+
+
+# -- probabilities -----------------------------------------------------------------------------
+
+PROB_OWNERS = [
+    ("ActionNoise", lambda p: ActionNoise(p)),
+    ("RandomEvent", lambda p: RandomEvent(1, p)),
+    ("ObservationMask", lambda p: ObservationMask("crop", 1, p)),
+]
+
+
+@pytest.mark.parametrize("owner,make", PROB_OWNERS, ids=[o for o, _ in PROB_OWNERS])
+@pytest.mark.parametrize("p", [-0.1, 1.0001, 2, -1e-9, math.inf, -math.inf, math.nan])
+def test_probability_outside_unit_interval(owner, make, p):
+    with pytest.raises(ValueError, match=rf"{owner}\.prob must be in {PROB}, got "):
+        make(p)
+
+
+@pytest.mark.parametrize("owner,make", PROB_OWNERS, ids=[o for o, _ in PROB_OWNERS])
+@pytest.mark.parametrize("p", ["0.3", None, True, [0.3], 1j])
+def test_probability_not_a_number(owner, make, p):
+    with pytest.raises(ValueError, match=rf"{owner}\.prob must be a number in {PROB}, got "
+                                         rf"{re.escape(repr(p))}"):
+        make(p)
+
+
+@pytest.mark.parametrize("owner,make", PROB_OWNERS, ids=[o for o, _ in PROB_OWNERS])
+def test_probability_bounds_are_allowed(owner, make):
+    for p in (0, 0.0, 1, 1.0, 0.5):
+        assert make(p).prob == float(p) and isinstance(make(p).prob, float)
+
+
+# -- concept drift -----------------------------------------------------------------------------
+
+SECONDARY_OK = Config(action_noise=ActionNoise(0.3))
+
+
+@pytest.mark.parametrize("period", [0, -1, -600])
+def test_period_below_one(period):
+    with pytest.raises(ValueError, match=rf"ConceptDrift\.period \(T\) must be >= 1 agent step, "
+                                         rf"got {period}"):
+        ConceptDrift("sudden", period, SECONDARY_OK)
+
+
+@pytest.mark.parametrize("period", [1.5, 300.0, "300", True, None])
+def test_period_not_an_int(period):
+    with pytest.raises(ValueError, match=r"ConceptDrift\.period must be an int"):
+        ConceptDrift("sudden", period, SECONDARY_OK)
+
+
+@pytest.mark.parametrize("schedule", ["linear", "Sudden", "", None])
+def test_unknown_schedule(schedule):
+    with pytest.raises(ValueError, match=r"ConceptDrift\.schedule must be one of "
+                                         rf"{re.escape(str(['sudden', 'cyclic', 'gradual']))}"):
+        ConceptDrift(schedule, 10, SECONDARY_OK)
+
+
+def test_drift_inside_drift():
+    inner = Config(drift=ConceptDrift("sudden", 10, SECONDARY_OK))
+    with pytest.raises(ValueError, match=r"ConceptDrift\.secondary cannot itself be a 2\.2 concept "
+                                         rf"drift \(allowed secondary types: {SECONDARY}\)"):
+        ConceptDrift("cyclic", 10, inner)
+
+
+def test_default_as_secondary():
+    with pytest.raises(ValueError, match=rf"ConceptDrift\.secondary must be of type {SECONDARY}, "
+                                         r"got type '3\.1'"):
+        ConceptDrift("sudden", 10, Config())
+    with pytest.raises(ValueError, match=rf"ConceptDrift\.secondary must be of type {SECONDARY}, "
+                                         r"got type '0'"):
+        ConceptDrift("sudden", 10, Config(ram_observation=True))
+    with pytest.raises(ValueError, match=rf"ConceptDrift\.secondary must be a Config of type "
+                                         rf"{SECONDARY}"):
+        ConceptDrift("sudden", 10, ActionNoise(0.3))
+    for ok in (SECONDARY_OK, Config(event=RandomEvent(1, 0.1)),
+               Config(observation=ObservationMask("crop", 5))):
+        assert Config(drift=ConceptDrift("gradual", 3, ok)).type == "2.2"
+
+
+def test_part_in_both_places():
+    with pytest.raises(ValueError, match=r"Config\.action_noise is set both directly and in "
+                                         r"drift\.secondary"):
+        Config(action_noise=ActionNoise(0.1), drift=ConceptDrift("sudden", 5, SECONDARY_OK))
+
+
+# -- type 0, config fields ---------------------------------------------------------------------
+
+def test_type0_with_a_mask():
+    with pytest.raises(ValueError, match=r"Config\.ram_observation \(type 0\) .* cannot be "
+                                         r"combined with an observation mask \(type 3\.2\)"):
+        Config(ram_observation=True, observation=ObservationMask("crop", 1))
+    assert Config(ram_observation=True).type == "0"
+    with pytest.raises(ValueError, match=r"Config\.ram_observation must be True or False"):
+        Config(ram_observation=1)
+
+
+def test_config_fields():
+    with pytest.raises(ValueError, match=r"Config\.granularity must be one of "
+                                         rf"{re.escape(str(['frame', 'step']))}, got 'agent'"):
+        Config(granularity="agent")
+    with pytest.raises(ValueError, match=r"Config\.type must be one of "
+                                         + re.escape("['0', '1', '2.1', '2.2', '3.1', '3.2', "
+                                                     "'mixed']")):
+        Config(type="9")
+    with pytest.raises(ValueError, match=r"Config\.type '1' does not match its parts, which make "
+                                         r"type '3\.1'"):
+        Config(type="1")
+    assert Config(type="1", action_noise=ActionNoise(0.1)).type == "1"
+    with pytest.raises(ValueError, match=r"Config\.action_noise must be a ActionNoise or None"):
+        Config(action_noise=0.3)
+    with pytest.raises(ValueError, match=r"Config\.observation must be a ObservationMask or None"):
+        Config(observation=RandomEvent(1, 0.5))
+
+
+def test_action_noise_fields():
+    with pytest.raises(ValueError, match=r"ActionNoise\.sticky must be True or False"):
+        ActionNoise(0.3, sticky=1)
+    for bad in ((), (-1,), (1, True), ("1",)):
+        with pytest.raises(ValueError, match=r"ActionNoise\.replacement_actions must be a "
+                                             r"non-empty tuple of action indices >= 0"):
+            ActionNoise(0.3, replacement_actions=bad)
+    with pytest.raises(ValueError, match=r"ActionNoise\.replacement_actions cannot be combined "
+                                         r"with sticky=True"):
+        ActionNoise(0.3, replacement_actions=(1,), sticky=True)
+    with pytest.raises(ValueError, match=r"Config\.action_noise\.replacement_actions \[18\] out of "
+                                         r"range: Boxing has actions 0\.\.17"):
+        Config(action_noise=ActionNoise(0.3, replacement_actions=(0, 18)), game="Boxing")
+    assert ActionNoise(0.3, replacement_actions=[3, 1]).replacement_actions == (3, 1)
+
+
+# -- the reference format ----------------------------------------------------------------------
+
+IS = "intrinsic_stochasticity"
+DRIFT = f"{IS}.action_independent_concept_drift"
+
+
+def ref(stype, **flat):
+    return {"stochasticity_type": stype, **{k.replace("__", "."): v for k, v in flat.items()}}
+
+
+def drift_ref(**override):
+    d = {"stochasticity_type": "2.2", f"{DRIFT}.temporal_mode": "sudden",
+         f"{DRIFT}.temporal_threshold": 300, f"{DRIFT}.secondary_concept_type": "3.2",
+         "partial_observation.type": "blackout", "partial_observation.mode": "10",
+         "partial_observation.prob": 1.0}
+    d.update(override)
+    return {k: v for k, v in d.items() if v is not ...}
+
+
+@pytest.mark.parametrize("d", [None, [("stochasticity_type", "1")], "3.1", 3.1])
+def test_reference_not_a_dict(d):
+    with pytest.raises(ValueError, match=r"reference config must be a dict"):
+        Config.from_reference(d)
+
+
+@pytest.mark.parametrize("stype", ["0", "4", "2.3", "3.2A", "", None])
+def test_reference_bad_type(stype):
+    with pytest.raises(ValueError, match=r"stochasticity_type must be one of "
+                                         + re.escape("['1', '2.1', '2.2', '3.1', '3.2']")):
+        Config.from_reference({"stochasticity_type": stype})
+
+
+@pytest.mark.parametrize("d,missing", [
+    ({}, "stochasticity_type"),
+    ({"stochasticity_type": "1"}, f"{IS}.action_dependent.stochastic_action_prob"),
+    ({"stochasticity_type": "2.1", f"{IS}.action_independent_random.random_stochasticity_prob":
+      0.1}, f"{IS}.action_independent_random.mode"),
+    ({"stochasticity_type": "2.1", f"{IS}.action_independent_random.mode": "1"},
+     f"{IS}.action_independent_random.random_stochasticity_prob"),
+    ({"stochasticity_type": "3.2", "partial_observation.mode": "1"}, "partial_observation.type"),
+    ({"stochasticity_type": "3.2", "partial_observation.type": "crop"},
+     "partial_observation.mode"),
+    (drift_ref(**{f"{DRIFT}.temporal_mode": ...}), f"{DRIFT}.temporal_mode"),
+    (drift_ref(**{f"{DRIFT}.temporal_threshold": ...}), f"{DRIFT}.temporal_threshold"),
+    (drift_ref(**{f"{DRIFT}.secondary_concept_type": ...}), f"{DRIFT}.secondary_concept_type"),
+    (drift_ref(**{"partial_observation.type": ...}), "partial_observation.type"),
+])
+def test_reference_missing_key(d, missing):
+    with pytest.raises(ValueError, match=rf"reference config is missing '{re.escape(missing)}'"):
+        Config.from_reference(d)
+    nested = {}
+    for key, value in d.items():  # the same dict, nested
+        *path, last = key.split(".")
+        node = nested
+        for p in path:
+            node = node.setdefault(p, {})
+        node[last] = value
+    with pytest.raises(ValueError, match=rf"reference config is missing '{re.escape(missing)}'"):
+        Config.from_reference(nested)
+
+
+@pytest.mark.parametrize("key,value,what", [
+    (f"{IS}.action_dependent.stochastic_action_prob", "abc", "a probability"),
+    (f"{IS}.action_dependent.stochastic_action_prob", None, "a probability"),
+    (f"{IS}.action_dependent.stochastic_action_prob", [0.3], "a probability"),
+    (f"{IS}.action_dependent.stochastic_action_prob", True, "a probability"),
+])
+def test_reference_bad_value_type1(key, value, what):
+    with pytest.raises(ValueError, match=rf"reference config '{re.escape(key)}' must be "
+                                         rf"{what}, got {re.escape(repr(value))}"):
+        Config.from_reference({"stochasticity_type": "1", key: value})
+
+
+@pytest.mark.parametrize("mode", ["x", "1.5", "", None, True, 2.5])
+def test_reference_bad_mode(mode):
+    key = f"{IS}.action_independent_random.mode"
+    with pytest.raises(ValueError, match=rf"reference config '{re.escape(key)}' must be an "
+                                         r"event mode"):
+        Config.from_reference({"stochasticity_type": "2.1", key: mode,
+                               f"{IS}.action_independent_random.random_stochasticity_prob": 0.1})
+    with pytest.raises(ValueError, match=r"reference config 'partial_observation\.mode' must be "
+                                         r"a mode"):
+        Config.from_reference({"stochasticity_type": "3.2", "partial_observation.type": "crop",
+                               "partial_observation.mode": mode})
+
+
+@pytest.mark.parametrize("threshold", ["abc", "1.5", 300.5, None, True])
+def test_reference_bad_threshold(threshold):
+    with pytest.raises(ValueError, match=rf"reference config '{re.escape(DRIFT)}"
+                                         r"\.temporal_threshold' must be an int number of agent "
+                                         rf"steps, got {re.escape(repr(threshold))}"):
+        Config.from_reference(drift_ref(**{f"{DRIFT}.temporal_threshold": threshold}))
+
+
+def test_reference_threshold_accepts_integral_values():
+    for t in (300, "300", 300.0, " 300 "):
+        config = Config.from_reference(drift_ref(**{f"{DRIFT}.temporal_threshold": t}))
+        assert config.drift.period == 300
+
+
+@pytest.mark.parametrize("secondary", ["2.2", "3.1", "0", "4", ""])
+def test_reference_bad_secondary(secondary):
+    with pytest.raises(ValueError, match=rf"{re.escape(DRIFT)}\.secondary_concept_type must be "
+                                         rf"one of {SECONDARY}, got '{re.escape(secondary)}'"):
+        Config.from_reference(drift_ref(**{f"{DRIFT}.secondary_concept_type": secondary}))
+
+
+def test_reference_values_checked_by_config():
+    with pytest.raises(ValueError, match=r"ConceptDrift\.period \(T\) must be >= 1"):
+        Config.from_reference(drift_ref(**{f"{DRIFT}.temporal_threshold": 0}))
+    with pytest.raises(ValueError, match=r"ConceptDrift\.schedule must be one of"):
+        Config.from_reference(drift_ref(**{f"{DRIFT}.temporal_mode": "weird"}))
+    with pytest.raises(ValueError, match=rf"ActionNoise\.prob must be in {PROB}, got 1\.5"):
+        Config.from_reference(ref("1", **{f"{IS}.action_dependent.stochastic_action_prob": 1.5}))
+    with pytest.raises(ValueError, match=r"ObservationMask\.kind must be one of"):
+        Config.from_reference(ref("3.2", partial_observation__type="hide",
+                                  partial_observation__mode="1"))
+    with pytest.raises(ValueError, match=r"ObservationMask\.mode \(crop\) must be one of"):
+        Config.from_reference(ref("3.2", partial_observation__type="crop",
+                                  partial_observation__mode="6"))
+    with pytest.raises(ValueError, match=r"Config\.observation\.mode 12 is not one of Breakout's "
+                                         rf"blackout modes: allowed {allowed(11)}"):
+        Config.from_reference(ref("3.2", partial_observation__type="blackout",
+                                  partial_observation__mode="12"), game="Breakout")
+    with pytest.raises(ValueError, match=r"Config\.drift\.secondary\.observation\.mode 12"):
+        Config.from_reference(drift_ref(**{"partial_observation.mode": "12"}), game="Breakout")
+    with pytest.raises(ValueError, match=r"unknown game 'Nope'"):
+        Config.from_reference(ref("3.1"), game="Nope")

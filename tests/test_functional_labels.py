@@ -1,0 +1,114 @@
+"""Type 0 labels (stori_jax.functional.extract_labels) on real RAM from ale-py."""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from stori_jax import get_game
+from stori_jax.functional import extract_labels
+
+# Breakout minimal action set: NOOP, FIRE, RIGHT, LEFT
+FIRE, RIGHT, LEFT, NOOP = 1, 2, 3, 0
+BALL_X, PADDLE_X = 99, 72
+
+
+def new_ale(rom_id):
+    ale_py = pytest.importorskip("ale_py")
+    ale_py.ALEInterface.setLoggerMode(ale_py.LoggerMode.Error)
+    ale = ale_py.ALEInterface()
+    ale.setInt("random_seed", 0)
+    ale.setFloat("repeat_action_probability", 0.0)
+    ale.loadROM(ale_py.roms.get_rom_path(rom_id))
+    return ale, ale.getMinimalActionSet()
+
+
+@functools.lru_cache(maxsize=None)
+def breakout_play(frames: int = 4000):
+    """Play Breakout by tracking the ball from RAM; (RAM after every frame (N, 128) uint8,
+    running sum of act() rewards after every frame (N,))."""
+    ale, actions = new_ale("breakout")
+    assert [a.name for a in actions] == ["NOOP", "FIRE", "RIGHT", "LEFT"]
+    rams, totals = [], []
+    total, lives, launch = 0, ale.lives(), True
+    for f in range(frames):
+        ram = ale.getRAM().astype(np.int32)
+        if ale.lives() < lives:
+            lives, launch = ale.lives(), True
+        if launch and f % 8 == 0:
+            a, launch = FIRE, False
+        else:  # move the paddle toward the ball
+            target = ram[PADDLE_X] + 4
+            a = RIGHT if ram[BALL_X] > target + 2 else LEFT if ram[BALL_X] < target - 2 else NOOP
+        total += ale.act(actions[a])
+        if ale.game_over():
+            break
+        rams.append(ale.getRAM().copy())
+        totals.append(total)
+    return np.stack(rams), np.array(totals)
+
+
+def bcd(v):
+    return (v >> 4) * 10 + (v & 15)
+
+
+def test_breakout_score_label_equals_running_reward_on_real_ram():
+    rams, totals = breakout_play()
+    labels = extract_labels(get_game("Breakout"), jnp.asarray(rams))
+    score = np.asarray(labels["score"])
+    assert score.shape == totals.shape and score.dtype == np.int32
+    np.testing.assert_array_equal(score, totals)  # on every frame
+    ram = rams.astype(np.int64)
+    np.testing.assert_array_equal(score, 100 * bcd(ram[:, 76]) + bcd(ram[:, 77]))
+    # the play is good enough to exercise several point values and the hundreds byte
+    assert len(np.unique(np.diff(totals))) >= 3, np.unique(np.diff(totals))
+    assert totals[-1] >= 100, totals[-1]
+    # the other labels are the RAM bytes of the spec
+    np.testing.assert_array_equal(np.asarray(labels["ball_x"]), rams[:, 99])
+    np.testing.assert_array_equal(np.asarray(labels["ball_y"]), rams[:, 101])
+    np.testing.assert_array_equal(np.asarray(labels["player_x"]), rams[:, 72])
+
+
+def test_breakout_score_label_bcd_synthetic():
+    ram = np.zeros((4, 128), np.uint8)
+    ram[:, 76] = [0x00, 0x01, 0x09, 0x12]
+    ram[:, 77] = [0x07, 0x00, 0x99, 0x34]
+    score = np.asarray(extract_labels(get_game("Breakout"), jnp.asarray(ram))["score"])
+    np.testing.assert_array_equal(score, [7, 100, 999, 1234])
+
+
+@pytest.mark.parametrize("rom_id,frames", [("boxing", 1500), ("gopher", 1500)])
+def test_score_labels_track_reward_on_real_ram(rom_id, frames):
+    """Boxing: reward = change of player - enemy score; Gopher: reward = change of the score."""
+    game = get_game(rom_id)
+    ale, actions = new_ale(rom_id)
+    rng = np.random.default_rng(0)
+    rams, totals, total = [], [], 0
+    for _ in range(frames):
+        total += ale.act(actions[rng.integers(len(actions))])
+        if ale.game_over():
+            break
+        rams.append(ale.getRAM().copy())
+        totals.append(total)
+    labels = extract_labels(game, jnp.asarray(np.stack(rams)))
+    if rom_id == "boxing":
+        value = np.asarray(labels["player_score"]) - np.asarray(labels["enemy_score"])
+    else:
+        value = np.asarray(labels["score"])
+    np.testing.assert_array_equal(value, np.array(totals))
+    assert np.any(np.diff(totals) != 0)  # something was scored
+
+
+def test_extract_labels_jit_and_vmap():
+    rams, _ = breakout_play()
+    game = get_game("Breakout")
+    batch = jnp.asarray(rams[:64].reshape(2, 32, 128))
+    out = jax.jit(jax.vmap(lambda r: extract_labels(game, r)))(batch)
+    for name, value in out.items():
+        assert value.shape == (2, 32) and value.dtype == jnp.int32
+        np.testing.assert_array_equal(np.asarray(value).ravel(),
+                                      np.asarray(extract_labels(game, rams[:64])[name]))
