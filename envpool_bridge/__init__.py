@@ -1,0 +1,150 @@
+"""The ``envpool`` backend: STORI on envpool's Atari environments, the fastest path for configs
+that need no RAM writes and no per-frame actions.
+
+envpool runs its own C++ thread pool and emulator build and does the frame skip itself (raw RGB
+210x160, one frame per stack, the last two screens max-pooled by envpool).  Supported:
+
+- type 1 (uniform or sticky) at ``step`` granularity, 3.1, 3.2 crop and blackout at ``step``
+  granularity, 2.2 drift over those, and type 0 (the RAM comes in envpool's info);
+- autoreset on the NEXT step (envpool's own): pass ``autoreset=False`` to ``stori_jax.make``.
+
+Anything else (2.1 events and RAM-obs modes write the RAM; ``frame`` granularity needs an action
+or a mask per emulator frame) raises ValueError naming what needs the ``subproc`` backend.
+Same seed -> same run on this backend too, but envpool ships its own emulator build and seeds it
+its own way, so runs are not bit-identical to the ``subproc`` backend.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from stori_jax.backends.subproc import EnvClosedError
+
+FRAMES_LAYOUT = "pooled_chw"  # (B, 3, 210, 160): envpool's max-pooled screen, channels first
+
+
+def unsupported_reason(plan) -> str | None:
+    """Why ``plan`` needs the subproc backend, or None if envpool can run it."""
+    if plan.event is not None:
+        return "2.1 random events write the RAM between frames"
+    if plan.mask is not None and plan.mask.kind == "ram":
+        return "RAM observation modes render frames from a modified RAM"
+    if plan.per_frame and plan.noise is not None:
+        return "type 1 at 'frame' granularity needs an action per emulator frame (use granularity='step')"
+    if plan.per_frame and plan.mask is not None:
+        return "masks at 'frame' granularity need each emulator frame (use granularity='step')"
+    if plan.autoreset:
+        return "envpool autoresets on the next step: pass autoreset=False"
+    return None
+
+
+def make_envpool_backend(plan, seed: int, max_episode_frames: int) -> "EnvpoolBackend":
+    reason = unsupported_reason(plan)
+    if reason is not None:
+        raise ValueError(f"backend='envpool' cannot run this config: {reason}; "
+                         "use backend='subproc' (the default), which supports every mode")
+    return EnvpoolBackend(plan, seed, max_episode_frames)
+
+
+class EnvpoolBackend:
+    """Adapts an envpool gymnasium-style pool to the backend protocol of ``stori_jax.Env``."""
+
+    frames_layout = FRAMES_LAYOUT
+
+    def __init__(self, plan, seed: int, max_episode_frames: int, num_threads: int | None = None):
+        try:
+            import envpool
+        except ImportError as e:
+            raise ValueError("backend='envpool' needs the envpool package: "
+                             "pip install 'stori-jax[envpool]'") from e
+        from stori_jax.games import get_game
+
+        game = get_game(plan.game)
+        task = "".join(part.capitalize() for part in game.rom_id.split("_")) + "-v5"
+        b = plan.num_envs
+        try:
+            self.pool = envpool.make(
+                task, env_type="gymnasium", num_envs=b, batch_size=b, seed=seed,
+                num_threads=num_threads or 0, img_height=210, img_width=160, gray_scale=False,
+                stack_num=1, frame_skip=plan.frame_skip, noop_max=plan.noop_max + 1,
+                episodic_life=False, reward_clip=False, repeat_action_probability=0.0,
+                use_fire_reset=False, full_action_space=False,
+                max_episode_steps=max(1, max_episode_frames // plan.frame_skip))
+        except Exception as e:  # envpool raises bare errors for unknown tasks
+            raise ValueError(f"envpool has no Atari task {task!r} for game {plan.game!r}") from e
+        self.num_envs = b
+        self.views = {
+            "executed": np.zeros((b, plan.frame_skip), np.int32),
+            "event_u": np.zeros((b, plan.frame_skip, 2), np.float32),
+            "event_active": np.zeros(b, np.uint8),
+            "ram_render": np.zeros(b, np.uint8),
+            "noops": np.zeros(b, np.int32),
+            "reset_first": np.zeros(b, np.uint8),
+            "frames": np.zeros((b, 3, 210, 160), np.uint8),
+            "ram": np.zeros((b, 128), np.uint8),
+            "reward": np.zeros(b, np.float32),
+            "terminated": np.zeros(b, np.uint8),
+            "truncated": np.zeros(b, np.uint8),
+            "lives": np.zeros(b, np.int32),
+            "event_fired": np.zeros(b, np.int32),
+            "ram_rendered": np.zeros(b, np.uint8),
+            "episode_return": np.zeros(b, np.float32),
+            "episode_length": np.zeros(b, np.int32),
+        }
+        self._running_return = np.zeros(b, np.float64)
+        self._running_length = np.zeros(b, np.int64)
+        self._pending = None
+        self._closed = False
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    @property
+    def pids(self) -> list[int]:
+        return []  # envpool runs threads inside this process
+
+    def _check(self):
+        if self._closed:
+            raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
+
+    def send_reset(self) -> None:
+        self._check()
+        self._pending = "reset"
+
+    def send_step(self) -> None:
+        self._check()
+        self.pool.send(self.views["executed"][:, 0].astype(np.int32))
+        self._pending = "step"
+
+    def recv(self) -> dict:
+        self._check()
+        v = self.views
+        if self._pending == "reset":
+            obs, info = self.pool.reset()
+            reward = np.zeros(self.num_envs, np.float32)
+            terminated = truncated = np.zeros(self.num_envs, bool)
+            reset_step = np.ones(self.num_envs, bool)
+        elif self._pending == "step":
+            obs, reward, terminated, truncated, info = self.pool.recv()
+            reset_step = v["reset_first"].astype(bool)  # envpool resets these itself
+        else:
+            raise RuntimeError("nothing in flight: call send_step() or send_reset() first")
+        self._pending = None
+        v["frames"][...] = obs
+        v["ram"][...] = info["ram"]
+        v["lives"][...] = info["lives"]
+        v["reward"][...] = reward
+        v["terminated"][...] = terminated
+        v["truncated"][...] = truncated
+        self._running_return = np.where(reset_step, 0.0, self._running_return + reward)
+        self._running_length = np.where(reset_step, 0, self._running_length + 1)
+        done = np.asarray(terminated) | np.asarray(truncated)
+        v["episode_return"][...] = np.where(done, self._running_return, 0.0)
+        v["episode_length"][...] = np.where(done, self._running_length, 0)
+        return v
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            self.pool.close()
