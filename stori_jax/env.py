@@ -110,6 +110,16 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
     return Env(plan, cfg, seed, worker_backend)
 
 
+def jit_key(plan: Plan) -> Plan:
+    """``plan`` without the facts only the workers use (event mode and probability, RAM-obs
+    mode), so configs that differ only there share one compilation of the JAX side."""
+    if plan.event is not None:
+        plan = dataclasses.replace(plan, event=dataclasses.replace(plan.event, mode=0, prob=0.0))
+    if plan.mask is not None and plan.mask.kind == "ram":
+        plan = dataclasses.replace(plan, mask=dataclasses.replace(plan.mask, mode=0))
+    return plan
+
+
 def _available_cores() -> int:
     import os
 
@@ -145,6 +155,7 @@ class Env:
         self.single_action_space = gym.spaces.Discrete(plan.num_actions)
         self.single_observation_space = gym.spaces.Box(0, 255, self.observation_space.shape[1:],
                                                        np.uint8)
+        self._jit_plan = jit_key(plan)
         self._state = initial_state(plan, seed)
         self._in_flight = None
         self._needs_reset = True
@@ -179,12 +190,12 @@ class Env:
     def reset(self):
         """Reset every env. Returns (obs, info)."""
         self._check_open()
-        if self._in_flight is not None:
-            self.backend.recv()
+        if self._in_flight is not None or getattr(self.backend, "pending", False):
+            self.backend.recv()  # finish a step (or an interrupted reset) still in flight
             self._in_flight = None
         zeros = jnp.zeros((self.num_envs,), jnp.int32)
         state = self._state._replace(episode_step=zeros, prev_executed=zeros)
-        state, draws = before_step(self.plan, state, zeros, resetting=True)
+        state, draws = before_step(self._jit_plan, state, zeros, resetting=True)
         views = self.backend.views
         self._write_inputs(views, draws, reset_first=None)
         self.backend.send_reset()
@@ -221,7 +232,7 @@ class Env:
         if self._in_flight is not None:
             raise RuntimeError("a step is already in flight: call recv() before send() again")
         a = self.validate_actions(actions)
-        state, draws = before_step(self.plan, self._state, a)
+        state, draws = before_step(self._jit_plan, self._state, a)
         self._write_inputs(self.backend.views, draws, reset_first=self._reset_pending)
         self.backend.send_step()
         self._in_flight = (state, draws, a, self._reset_pending.copy())
@@ -232,8 +243,8 @@ class Env:
         if self._in_flight is None:
             raise RuntimeError("nothing in flight: call send(actions) first")
         state, draws, actions, was_reset = self._in_flight
+        out = self.backend.recv()  # if interrupted (Ctrl-C), the step stays in flight
         self._in_flight = None
-        out = self.backend.recv()
         terminated = out["terminated"].astype(bool)
         truncated = out["truncated"].astype(bool)
         done = terminated | truncated
@@ -267,7 +278,7 @@ class Env:
 
     def _finish(self, state, draws, out, new_episode):
         state, obs, masked, labels = after_step(
-            self.plan, state, draws, out["frames"], out["ram"].copy(),
+            self._jit_plan, state, draws, out["frames"], out["ram"].copy(),
             out["ram_rendered"].copy(), jnp.asarray(new_episode))
         # the workers overwrite their buffers on the next send: finish reading them now
         obs = jax.block_until_ready(obs)

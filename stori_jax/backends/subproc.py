@@ -113,6 +113,7 @@ class SubprocBackend:
             self.processes.append(process)
             self.conns.append(parent_conn)
         self._pending = False
+        self._waiting = None
         try:
             self._wait_all("start")
         except BaseException:
@@ -122,6 +123,11 @@ class SubprocBackend:
     @property
     def closed(self) -> bool:
         return not self._finalizer.alive
+
+    @property
+    def pending(self) -> bool:
+        """A command was sent and its replies are not all in (e.g. its wait was interrupted)."""
+        return self._pending
 
     def _send_all(self, command: bytes) -> None:
         if self.closed:
@@ -144,7 +150,12 @@ class SubprocBackend:
                           f"with exit code {p.exitcode}; the environment is closed")
 
     def _wait_all(self, what: str) -> None:
-        waiting = dict(enumerate(self.conns))
+        # The workers still to reply live on self: if the wait is interrupted (Ctrl-C), the
+        # command stays pending and the next recv() resumes it, instead of a later command
+        # taking this one's replies (and the workers' half-written buffers) for its own.
+        if self._waiting is None:
+            self._waiting = dict(enumerate(self.conns))
+        waiting = self._waiting
         sentinels = {p.sentinel: w for w, p in enumerate(self.processes)}
         try:
             while waiting:
@@ -166,8 +177,10 @@ class SubprocBackend:
                         raise WorkerError(f"emulator worker {w} (envs {lo}..{hi - 1}) failed "
                                           f"during {what}:\n{reply[1:].decode(errors='replace')}")
                     del waiting[w]
-        finally:
-            self._pending = False
+        except WorkerError:
+            self._waiting, self._pending = None, False
+            raise
+        self._waiting, self._pending = None, False
 
     # -- the backend protocol ---------------------------------------------------------------
 

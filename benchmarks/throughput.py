@@ -1,0 +1,368 @@
+"""Throughput of stori-jax next to the emulator limit and its peers, in ONE run on one machine.
+
+    python benchmarks/throughput.py            # everything (about 15 minutes on 2 cores)
+    python benchmarks/throughput.py --quick    # Breakout only, fewer sizes (about 3 minutes)
+
+Measured (agent steps per second, frame skip 4, summed over the batch):
+- emulator limit: W plain processes each looping bare ``ale_py.ALEInterface`` emulators doing
+  exactly the per-step work of a worker (4 frames, two screens, one RAM read), no signalling;
+- raw envpool (same B, W threads, raw RGB) and ale-py's ``AtariVectorEnv``;
+- the naive way: gymnasium AsyncVectorEnv, one process per env, numpy STORI wrappers;
+- stori-jax on both backends for every paper preset, obs ``raw`` and ``atari84``, and a sweep
+  over B for 3.1.
+
+Writes benchmarks/results/<date>-<host>.json, a markdown table (.md) and PNG plots.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import multiprocessing as mp
+import os
+import platform
+import socket
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+FRAME_SKIP = 4
+
+
+def cores() -> int:
+    return len(os.sched_getaffinity(0))
+
+
+# -- the emulator limit ---------------------------------------------------------------------
+
+def _limit_worker(rom_id, n, seconds, start, out):
+    from ale_py import ALEInterface, LoggerMode, roms
+
+    ALEInterface.setLoggerMode(LoggerMode.Error)
+    emus = []
+    for i in range(n):
+        ale = ALEInterface()
+        ale.setInt("random_seed", i)
+        ale.setFloat("repeat_action_probability", 0.0)
+        ale.loadROM(roms.get_rom_path(rom_id))
+        emus.append((ale, ale.getMinimalActionSet()))
+    screens = np.zeros((n, 2, 210, 160, 3), np.uint8)
+    ram = np.zeros((n, 128), np.uint8)
+    rng = np.random.default_rng(0)
+    start.wait()
+    steps, t_end = 0, time.perf_counter() + seconds
+    while time.perf_counter() < t_end:
+        for e, (ale, actions) in enumerate(emus):
+            a = actions[rng.integers(len(actions))]
+            for f in range(FRAME_SKIP):
+                ale.act(a)
+                if f >= FRAME_SKIP - 2:
+                    ale.getScreenRGB(screens[e, f - FRAME_SKIP + 2])
+            ale.getRAM(ram[e])
+            if ale.game_over():
+                ale.reset_game()
+        steps += n
+    out.put(steps)
+
+
+def emulator_limit(game, batch, workers, seconds):
+    from stori_jax.games import get_game
+
+    ctx = mp.get_context("spawn")
+    start, out = ctx.Event(), ctx.Queue()
+    sizes = [len(r) for r in np.array_split(np.arange(batch), workers)]
+    procs = [ctx.Process(target=_limit_worker,
+                         args=(get_game(game).rom_id, n, seconds, start, out)) for n in sizes]
+    for p in procs:
+        p.start()
+    time.sleep(1.5)  # let every worker load its ROMs
+    start.set()
+    total = sum(out.get() for _ in procs)
+    for p in procs:
+        p.join()
+    return total / seconds
+
+
+# -- peers ------------------------------------------------------------------------------------
+
+def _timed_loop(step, num_envs, num_actions, seconds, warmup=20):
+    rng = np.random.default_rng(0)
+    actions = rng.integers(0, num_actions, (256, num_envs)).astype(np.int32)
+    for t in range(warmup):
+        step(actions[t % 256])
+    steps, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        step(actions[steps % 256])
+        steps += 1
+    return steps * num_envs / (time.perf_counter() - t0)
+
+
+def envpool_raw(game, batch, workers, seconds):
+    import envpool
+
+    from stori_jax.games import get_game
+
+    spec = get_game(game)
+    task = "".join(p.capitalize() for p in spec.rom_id.split("_")) + "-v5"
+    env = envpool.make(task, env_type="gymnasium", num_envs=batch, batch_size=batch,
+                       num_threads=workers, img_height=210, img_width=160, gray_scale=False,
+                       stack_num=1, frame_skip=FRAME_SKIP, noop_max=1, episodic_life=False,
+                       reward_clip=False, repeat_action_probability=0.0)
+    env.reset()
+    rate = _timed_loop(lambda a: env.step(a), batch, spec.num_actions, seconds)
+    env.close()
+    return rate
+
+
+def ale_vector(game, batch, workers, seconds):
+    from ale_py.vector_env import AtariVectorEnv
+
+    from stori_jax.games import get_game
+
+    spec = get_game(game)
+    env = AtariVectorEnv(spec.rom_id, batch, num_threads=workers, img_height=210, img_width=160,
+                         grayscale=False, stack_num=1, frameskip=FRAME_SKIP, maxpool=True,
+                         noop_max=0, reward_clipping=False, use_fire_reset=False)
+    env.reset(seed=0)
+    rate = _timed_loop(lambda a: env.step(a), batch, spec.num_actions, seconds)
+    env.close()
+    return rate
+
+
+def naive(game, preset, batch, seconds):
+    from naive_baseline import make_naive_vector_env
+
+    import stori_jax
+
+    env = make_naive_vector_env(game, stori_jax.preset(game, preset), batch, seed=0)
+    env.reset(seed=0)
+    rate = _timed_loop(lambda a: env.step(a), batch, stori_jax.get_game(game).num_actions,
+                       seconds, warmup=5)
+    env.close()
+    return rate
+
+
+def stori(game, preset, batch, workers, seconds, obs, backend):
+    import stori_jax
+
+    kwargs = {}
+    if backend == "envpool":
+        kwargs = dict(autoreset=False, granularity="step")
+    else:
+        kwargs = dict(num_workers=workers)
+    env = stori_jax.make(game, preset, num_envs=batch, seed=0, obs=obs, backend=backend,
+                         **kwargs)
+    env.reset()
+    rate = _timed_loop(lambda a: env.step(a), batch, env.num_actions, seconds)
+    env.close()
+    return rate
+
+
+def envpool_supports(game, preset):
+    import stori_jax
+    from envpool_bridge import unsupported_reason
+    from stori_jax.plan import compile_plan
+
+    cfg = stori_jax.preset(game, preset).replace(granularity="step")
+    plan = compile_plan(cfg, stori_jax.get_game(game), num_envs=1, frame_skip=FRAME_SKIP,
+                        obs="raw", noop_max=0, autoreset=False)
+    return unsupported_reason(plan) is None
+
+
+# -- the run ----------------------------------------------------------------------------------
+
+def plan_measurements(args):
+    import stori_jax
+
+    games = ["Breakout"] if args.quick else list(stori_jax.STORI_GAMES)
+    presets = [(g, p) for g, p in stori_jax.list_presets() if g in games]
+    w = args.workers
+    jobs = []
+    for g in games:
+        jobs.append(dict(kind="emulator limit", game=g, preset="-", B=args.batch, backend="-",
+                         obs="raw", fn=lambda g=g: emulator_limit(g, args.batch, w, args.seconds)))
+    for b in args.sizes:
+        jobs.append(dict(kind="emulator limit", game="Breakout", preset="-", B=b, backend="-",
+                         obs="raw", fn=lambda b=b: emulator_limit("Breakout", b, w, args.seconds)))
+        jobs.append(dict(kind="envpool raw", game="Breakout", preset="-", B=b, backend="envpool",
+                         obs="raw", fn=lambda b=b: envpool_raw("Breakout", b, w, args.seconds)))
+        jobs.append(dict(kind="ale-py AtariVectorEnv", game="Breakout", preset="-", B=b,
+                         backend="ale-py", obs="raw",
+                         fn=lambda b=b: ale_vector("Breakout", b, w, args.seconds)))
+        for obs in ("raw", "atari84"):
+            jobs.append(dict(kind="stori-jax", game="Breakout", preset="3.1", B=b,
+                             backend="subproc", obs=obs,
+                             fn=lambda b=b, obs=obs: stori("Breakout", "3.1", b, w, args.seconds,
+                                                           obs, "subproc")))
+    for g, p in presets:
+        if not args.skip_naive:
+            jobs.append(dict(kind="naive gymnasium", game=g, preset=p, B=args.batch,
+                             backend="gymnasium-async", obs="raw",
+                             fn=lambda g=g, p=p: naive(g, p, args.batch, args.seconds)))
+        for obs in ("raw", "atari84"):
+            for backend in ("subproc", "envpool"):
+                if backend == "subproc" and p == "3.1" and g == "Breakout" \
+                        and args.batch in args.sizes:
+                    continue  # measured in the sweep
+                if backend == "envpool" and not envpool_supports(g, p):
+                    continue
+                jobs.append(dict(kind="stori-jax", game=g, preset=p, B=args.batch,
+                                 backend=backend, obs=obs,
+                                 fn=lambda g=g, p=p, obs=obs, backend=backend: stori(
+                                     g, p, args.batch, w, args.seconds, obs, backend)))
+    return jobs
+
+
+def run(args):
+    from tqdm import tqdm
+
+    jobs = plan_measurements(args)
+    results = []
+    for job in tqdm(jobs, desc="throughput", unit="run"):
+        fn = job.pop("fn")
+        try:
+            job["steps_per_s"] = float(fn())
+        except Exception as e:  # noqa: BLE001 - record and go on: one failure must not lose the run
+            job["steps_per_s"] = None
+            job["error"] = f"{type(e).__name__}: {e}"
+        job["W"] = args.workers
+        results.append(job)
+    return results
+
+
+def add_ratios(results):
+    limits = {(r["game"], r["B"]): r["steps_per_s"] for r in results
+              if r["kind"] == "emulator limit"}
+    own_31 = {(r["game"], r["B"], r["obs"], r["backend"]): r["steps_per_s"] for r in results
+              if r["kind"] == "stori-jax" and r["preset"] == "3.1"}
+    naive_rate = {(r["game"], r["preset"]): r["steps_per_s"] for r in results
+                  if r["kind"] == "naive gymnasium"}
+    raw = {(r["game"], r["preset"], r["B"], r["backend"]): r["steps_per_s"] for r in results
+           if r["kind"] == "stori-jax" and r["obs"] == "raw"}
+    for r in results:
+        rate = r["steps_per_s"]
+        if rate is None:
+            continue
+        limit = limits.get((r["game"], r["B"]))
+        r["vs_limit"] = rate / limit if limit else None
+        if r["kind"] == "stori-jax":
+            base = own_31.get((r["game"], r["B"], r["obs"], r["backend"]))
+            r["vs_own_3.1"] = rate / base if base else None
+            n = naive_rate.get((r["game"], r["preset"]))
+            r["vs_naive"] = rate / n if n else None
+            if r["obs"] == "atari84":
+                rr = raw.get((r["game"], r["preset"], r["B"], r["backend"]))
+                r["atari84_vs_raw"] = rate / rr if rr else None
+    return results
+
+
+def fmt(x, spec=".2f"):
+    return "-" if x is None else format(x, spec)
+
+
+def markdown(results, meta) -> str:
+    lines = [f"# Throughput, {meta['date']} on {meta['host']} ({meta['cores']} cores, "
+             f"W = {meta['workers']} workers/threads)", "",
+             "Agent steps per second summed over the batch (frame skip 4). Ratios are to the "
+             "emulator limit of the same game and B, measured in this run.", "",
+             "| kind | game | preset | backend | obs | B | steps/s | vs limit | vs own 3.1 | "
+             "vs naive | atari84/raw |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        lines.append(
+            f"| {r['kind']} | {r['game']} | {r['preset']} | {r['backend']} | {r['obs']} | "
+            f"{r['B']} | {fmt(r['steps_per_s'], '.0f')} | {fmt(r.get('vs_limit'))} | "
+            f"{fmt(r.get('vs_own_3.1'))} | {fmt(r.get('vs_naive'))} | "
+            f"{fmt(r.get('atari84_vs_raw'))} |" + (f" error: {r['error']}" if "error" in r else ""))
+    return "\n".join(lines) + "\n"
+
+
+def plots(results, stem: Path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    series = {}
+    for r in results:
+        if r["game"] != "Breakout" or r["preset"] not in ("-", "3.1") or r["steps_per_s"] is None:
+            continue
+        if r["kind"] == "naive gymnasium":
+            continue
+        label = r["kind"] + ("" if r["kind"] != "stori-jax" else f" {r['backend']} {r['obs']}")
+        series.setdefault(label, []).append((r["B"], r["steps_per_s"]))
+    for label, points in sorted(series.items()):
+        points = sorted(set(points))
+        if len(points) > 1:
+            ax.plot(*zip(*points), marker="o", label=label)
+    ax.set_xscale("log", base=2)
+    ax.set_xlabel("batch size B")
+    ax.set_ylabel("agent steps / s")
+    ax.set_title("Breakout 3.1: throughput vs batch size")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(stem.with_name(stem.name + "-vs-batch.png"), dpi=120)
+    plt.close(fig)
+
+    rows = [r for r in results if r["kind"] == "stori-jax" and r.get("vs_limit") is not None
+            and r["B"] == max(x["B"] for x in results if x["preset"] not in ("-", "3.1"))
+            or (r["kind"] == "naive gymnasium" and r.get("vs_limit") is not None)]
+    labels = sorted({f"{r['game']} {r['preset']}" for r in rows},
+                    key=lambda s: (s.split()[0], s.split()[1]))
+    kinds = sorted({(r["kind"], r["backend"], r["obs"]) for r in rows})
+    fig, ax = plt.subplots(figsize=(max(8, len(labels) * 0.6), 5))
+    width = 0.8 / max(1, len(kinds))
+    for k, kind in enumerate(kinds):
+        values = []
+        for label in labels:
+            match = [r["vs_limit"] for r in rows if f"{r['game']} {r['preset']}" == label
+                     and (r["kind"], r["backend"], r["obs"]) == kind]
+            values.append(match[0] if match else 0)
+        ax.bar(np.arange(len(labels)) + k * width, values, width, label=" ".join(kind))
+    ax.axhline(1.0, color="k", lw=0.8)
+    ax.set_xticks(np.arange(len(labels)) + 0.4 - width / 2, labels, rotation=60, ha="right",
+                  fontsize=8)
+    ax.set_ylabel("fraction of the emulator limit")
+    ax.set_title("Per preset, as a fraction of the emulator limit")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(stem.with_name(stem.name + "-presets.png"), dpi=120)
+    plt.close(fig)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true", help="Breakout only, B in {8, 32}")
+    parser.add_argument("--seconds", type=float, default=3.0, help="measuring time per run")
+    parser.add_argument("--batch", type=int, default=32, help="B for the per-preset runs")
+    parser.add_argument("--sizes", type=int, nargs="+", default=[8, 16, 32, 64])
+    parser.add_argument("--workers", type=int, default=cores())
+    parser.add_argument("--skip-naive", action="store_true")
+    parser.add_argument("--out", type=Path, default=HERE / "results")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.sizes = [8, 32]
+    meta = dict(date=datetime.date.today().isoformat(), host=socket.gethostname(),
+                cores=cores(), workers=args.workers, python=platform.python_version(),
+                seconds=args.seconds, argv=sys.argv[1:])
+    results = add_ratios(run(args))
+    args.out.mkdir(parents=True, exist_ok=True)
+    stem = args.out / f"{meta['date']}-{meta['host']}"
+    stem.with_suffix(".json").write_text(json.dumps(dict(meta=meta, results=results), indent=1))
+    table = markdown(results, meta)
+    stem.with_suffix(".md").write_text(table)
+    plots(results, stem)
+    print(table)
+    print(f"wrote {stem}.json, {stem}.md and PNG plots")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,113 @@
+"""Type 1 (action corruption) through ``stori_jax.make``: the executed actions reported in
+``info['executed_action']`` are the ones the emulators execute, corrupted at rate p, with the
+replacement drawn uniformly from the game's set (BankHeist: actions 0..9)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from stori_jax import ActionNoise, Config
+
+from _env_support import binomial_ok, make, random_actions, run_env, to_numpy
+
+
+def noise(prob, granularity="frame", **kw):
+    return Config(action_noise=ActionNoise(prob, **kw), granularity=granularity)
+
+
+def test_frame_granularity_corrupts_each_frame_at_rate_p():
+    steps, p = 100, 0.3
+    env = make("Breakout", noise(p))
+    try:
+        run = run_env(env, random_actions(4, steps, 2, seed=31))
+    finally:
+        env.close()
+    executed, corrupted = run.stacked("executed_action"), run.stacked("action_corrupted")
+    assert executed.shape == corrupted.shape == (steps, 2, 4)
+    assert executed.dtype.kind == "i" and corrupted.dtype == bool
+    intended = np.broadcast_to(run.stacked("actions")[:, :, None], executed.shape)
+    np.testing.assert_array_equal(executed[~corrupted], intended[~corrupted])
+    assert binomial_ok(int(corrupted.sum()), corrupted.size, p)
+    # the replacement is uniform over the whole minimal set (it may equal the intended action)
+    counts = np.bincount(executed[corrupted], minlength=4)
+    assert len(counts) == 4 and binomial_ok(int(counts[0]), int(corrupted.sum()), 0.25)
+    assert (counts > 0).all()
+    changed = (executed != intended).sum()
+    assert binomial_ok(int(changed), executed.size, p * 3 / 4)
+
+
+def test_step_granularity_draws_once_per_step():
+    steps, p = 120, 0.4
+    env = make("Gopher", noise(p, "step"))
+    try:
+        run = run_env(env, random_actions(8, steps, 2, seed=32))
+    finally:
+        env.close()
+    executed, corrupted = run.stacked("executed_action"), run.stacked("action_corrupted")
+    assert executed.shape == corrupted.shape == (steps, 2)
+    intended = run.stacked("actions")
+    np.testing.assert_array_equal(executed[~corrupted], intended[~corrupted])
+    assert binomial_ok(int(corrupted.sum()), corrupted.size, p)
+    assert ((0 <= executed) & (executed < 8)).all()
+
+
+def test_reported_executed_actions_are_the_executed_ones():
+    """Feeding a 3.1 twin (frame_skip 1) the reported executed actions reproduces the noisy
+    run's RAM and rewards frame for frame."""
+    steps = 60
+    ev = make("Boxing", noise(0.5), frame_skip=1)
+    twin = make("Boxing", frame_skip=1)
+    intended = random_actions(18, steps, 2, seed=33)
+    try:
+        ev_ram = [to_numpy(ev.reset()[1]["ram"])]
+        twin_ram = [to_numpy(twin.reset()[1]["ram"])]
+        ev_reward, twin_reward, n_changed = [], [], 0
+        for k in range(steps):
+            _, r, _, _, info = to_numpy(ev.step(intended[k]))
+            executed = info["executed_action"]
+            assert executed.shape == (2, 1)
+            n_changed += int((executed[:, 0] != intended[k]).sum())
+            _, tr, _, _, tinfo = to_numpy(twin.step(executed[:, 0]))
+            ev_ram.append(info["ram"])
+            twin_ram.append(tinfo["ram"])
+            ev_reward.append(r)
+            twin_reward.append(tr)
+    finally:
+        ev.close()
+        twin.close()
+    assert n_changed > 10
+    np.testing.assert_array_equal(np.stack(ev_ram), np.stack(twin_ram))
+    np.testing.assert_array_equal(np.stack(ev_reward), np.stack(twin_reward))
+
+
+def test_bankheist_replacements_never_fire():
+    """BankHeist draws the replacement from actions 0..9 (no FIRE, no self-bombing)."""
+    steps = 60
+    env = make("BankHeist", noise(1.0))
+    intended = np.random.default_rng(34).integers(10, 18, (steps, 2)).astype(np.int32)
+    try:
+        run = run_env(env, intended)
+    finally:
+        env.close()
+    executed, corrupted = run.stacked("executed_action"), run.stacked("action_corrupted")
+    assert corrupted.all()
+    assert ((0 <= executed) & (executed < 10)).all()
+    assert set(np.unique(executed)) == set(range(10))
+
+
+def test_sticky_actions_repeat_the_previous_executed_action():
+    steps = 80
+    env = make("Boxing", noise(0.5, sticky=True))
+    try:
+        run = run_env(env, random_actions(18, steps, 2, seed=35))
+    finally:
+        env.close()
+    executed, corrupted = run.stacked("executed_action"), run.stacked("action_corrupted")
+    intended = run.stacked("actions")
+    flat = executed.transpose(1, 0, 2).reshape(2, -1)  # (B, T * frame_skip) frame by frame
+    previous = np.concatenate([np.zeros((2, 1), flat.dtype), flat[:, :-1]], 1)
+    fired = corrupted.transpose(1, 0, 2).reshape(2, -1)
+    wanted = np.repeat(intended.T, 4, axis=1)
+    np.testing.assert_array_equal(flat[fired], previous[fired])
+    np.testing.assert_array_equal(flat[~fired], wanted[~fired])
+    assert binomial_ok(int(fired.sum()), fired.size, 0.5)

@@ -1,0 +1,105 @@
+"""Type 2.2 concept drift through ``stori_jax.make``: the concept switches at the exact agent
+step (0-indexed step k is concept 2 iff k >= T for sudden, (k // T) % 2 for cyclic), returning
+to concept 1 removes the secondary's effect, and the counter restarts with every episode."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from stori_jax import ActionNoise, Config, ConceptDrift, ObservationMask
+
+from _env_support import NOOP, make, random_actions, run_env, run_lockstep
+
+BREAKOUT_ALL = [(8, 151, 57, 92), (7, 152, 189, 195), (2, 158, 3, 16), (8, 151, 105, 130),
+                (8, 151, 131, 156), (8, 151, 157, 182)]  # Breakout blackout mode 1, black
+
+
+def breakout_blackout_hidden():
+    hidden = np.zeros((210, 160), bool)
+    for x0, x1, y0, y1 in BREAKOUT_ALL:
+        hidden[y0:y1 + 1, x0:x1 + 1] = True
+    return hidden
+
+
+def drift(schedule, period, secondary, **kw):
+    return Config(drift=ConceptDrift(schedule, period, secondary), **kw)
+
+
+def test_sudden_drift_to_blackout_switches_at_step_T_and_restarts_each_episode():
+    """T = 5, episodes of 10 steps (max_episode_frames 40, frame_skip 4): steps 0..4 of each
+    episode show the twin's screen, steps 5..9 the blackout; the observation returned at the
+    episode end is the next episode's first (unmasked) one."""
+    steps, T = 25, 5
+    config = drift("sudden", T, Config(observation=ObservationMask("blackout", 1, 1.0)))
+    kw = dict(obs="raw", max_episode_frames=40)
+    ev_env, twin_env = make("Breakout", config, **kw), make("Breakout", **kw)
+    actions = random_actions(4, steps, 2, seed=21)
+    try:
+        ev, twin = run_lockstep([ev_env, twin_env], steps, lambda k, runs: actions[k])
+    finally:
+        ev_env.close()
+        twin_env.close()
+    np.testing.assert_array_equal(ev.ram, twin.ram)
+    episode_step = np.arange(steps) % 10
+    concept = ev.stacked("concept")
+    np.testing.assert_array_equal(concept, np.repeat((episode_step >= T)[:, None], 2, 1))
+    truncated = ev.stacked("truncated")
+    np.testing.assert_array_equal(truncated[:, 0], episode_step == 9)
+    # concept 2 masks the observation, except the first observation of the next episode
+    masked = ev.stacked("obs_masked")
+    np.testing.assert_array_equal(masked, (concept == 1) & ~truncated)
+    assert not ev.reset_info["obs_masked"].any()
+    obs, twin_obs = ev.stacked("obs"), twin.stacked("obs")
+    hidden = breakout_blackout_hidden()
+    np.testing.assert_array_equal(obs[~masked], twin_obs[~masked])
+    np.testing.assert_array_equal(obs[masked][:, ~hidden], twin_obs[masked][:, ~hidden])
+    assert not obs[masked][:, hidden].any()
+    np.testing.assert_array_equal(ev.reset_obs, twin.reset_obs)
+
+
+def test_cyclic_drift_to_a_ram_obs_mode_alternates_every_T_steps():
+    """Boxing, cyclic T = 3 to RAM mode 2 (hide enemy): the observation is rendered from the
+    modified RAM exactly on steps 3..5, 9..11, ...; the game always equals the twin's."""
+    steps, T = 14, 3
+    config = drift("cyclic", T, Config(observation=ObservationMask("ram", 2, 1.0)))
+    actions = random_actions(18, steps, 2, seed=22)
+    ev_env, twin_env = make("Boxing", config, obs="raw"), make("Boxing", obs="raw")
+    try:
+        ev, twin = run_lockstep([ev_env, twin_env], steps, lambda k, runs: actions[k])
+    finally:
+        ev_env.close()
+        twin_env.close()
+    np.testing.assert_array_equal(ev.ram, twin.ram)
+    np.testing.assert_array_equal(ev.stacked("reward"), twin.stacked("reward"))
+    expected = (np.arange(steps) // T) % 2
+    np.testing.assert_array_equal(ev.stacked("concept"), np.repeat(expected[:, None], 2, 1))
+    masked = ev.stacked("obs_masked")
+    np.testing.assert_array_equal(masked, ev.stacked("concept") == 1)
+    obs, twin_obs = ev.stacked("obs"), twin.stacked("obs")
+    np.testing.assert_array_equal(obs[~masked], twin_obs[~masked])
+    assert (obs[masked] != twin_obs[masked]).any(axis=(1, 2, 3)).all()
+    assert not ev.reset_info["obs_masked"].any()
+
+
+def test_drift_to_action_noise_restarts_after_autoreset():
+    """Sudden T = 3 to type 1 with p = 1 at step granularity, episodes of 8 steps: corruption
+    happens exactly on episode steps 3..7 of every episode."""
+    steps, T = 20, 3
+    config = drift("sudden", T, Config(action_noise=ActionNoise(1.0)), granularity="step")
+    env = make("Breakout", config, max_episode_frames=32)
+    try:
+        run = run_env(env, np.full((steps, 2), NOOP, np.int32))
+    finally:
+        env.close()
+    episode_step = np.arange(steps) % 8
+    np.testing.assert_array_equal(run.stacked("truncated")[:, 0], episode_step == 7)
+    np.testing.assert_array_equal(run.stacked("episode_length")[:, 0],
+                                  np.where(episode_step == 7, 8, 0))
+    concept = run.stacked("concept")
+    np.testing.assert_array_equal(concept, np.repeat((episode_step >= T)[:, None], 2, 1))
+    corrupted = run.stacked("action_corrupted")
+    assert corrupted.shape == (steps, 2)
+    np.testing.assert_array_equal(corrupted, concept == 1)
+    executed = run.stacked("executed_action")
+    assert (executed[concept == 0] == NOOP).all()
+    assert (executed[concept == 1] != NOOP).any()

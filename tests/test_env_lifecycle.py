@@ -1,0 +1,274 @@
+"""Lifecycle and input validation of ``stori_jax.make`` / ``Env``: dead workers, close, garbage
+collection, Ctrl-C, and the error messages of bad arguments and actions."""
+
+from __future__ import annotations
+
+import gc
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import stori_jax
+from stori_jax import Config, ObservationMask
+
+from _env_support import make, process_gone
+
+
+def wait_gone(pids, timeout=5.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if all(process_gone(pid) for pid in pids):
+            return True
+        time.sleep(0.05)
+    return all(process_gone(pid) for pid in pids)
+
+
+def test_close_stops_every_worker_and_later_calls_raise():
+    env = make("Breakout", num_envs=3, num_workers=3)
+    pids = list(env.backend.pids)
+    assert len(pids) == 3 and len(set(pids)) == 3
+    env.reset()
+    env.step(np.zeros(3, np.int32))
+    assert not any(process_gone(pid) for pid in pids)
+    env.close()
+    assert env.closed
+    assert all(process_gone(pid) for pid in pids)  # close() waits for them
+    for pid in pids:
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)  # reaped: no zombie left behind
+    with pytest.raises(stori_jax.EnvClosedError):
+        env.step(np.zeros(3, np.int32))
+    with pytest.raises(stori_jax.EnvClosedError):
+        env.reset()
+    env.close()  # idempotent
+
+
+def test_context_manager_closes():
+    with make("Boxing") as env:
+        pids = list(env.backend.pids)
+        env.reset()
+    assert env.closed and wait_gone(pids, 1.0)
+
+
+def test_deleting_the_env_stops_its_workers():
+    env = make("Gopher", num_envs=2, num_workers=2)
+    env.reset()
+    env.step(np.zeros(2, np.int32))
+    pids = list(env.backend.pids)
+    del env
+    gc.collect()
+    assert wait_gone(pids, 3.0)
+
+
+@pytest.mark.timeout(30)
+def test_a_killed_worker_raises_worker_error_quickly():
+    env = make("Breakout", num_envs=4, num_workers=2)
+    pids = list(env.backend.pids)
+    env.reset()
+    env.step(np.zeros(4, np.int32))
+    os.kill(pids[0], signal.SIGKILL)
+    start = time.monotonic()
+    with pytest.raises(stori_jax.WorkerError, match="died"):
+        for _ in range(3):  # the first call may already have been sent to a live pipe
+            env.step(np.zeros(4, np.int32))
+    assert time.monotonic() - start < 2.0
+    assert env.closed
+    assert wait_gone(pids, 3.0)  # the surviving worker is stopped too
+    with pytest.raises(stori_jax.EnvClosedError):
+        env.step(np.zeros(4, np.int32))
+
+
+@pytest.mark.timeout(60)
+def test_an_interrupted_step_stays_in_flight_and_can_be_finished():
+    """Ctrl-C while waiting for the emulators (a notebook interrupt): the step stays in flight;
+    recv() finishes it with the right result, and later steps match an uninterrupted twin.
+    (Before the fix the next step() took the interrupted step's replies as its own.)"""
+    kw = dict(frame_skip=1000)  # slow steps (~0.2 s), so that the interrupt lands in the wait
+    ev, twin = make("Breakout", **kw), make("Breakout", **kw)
+    armed = threading.Event()
+
+    def on_sigint(*_):
+        if armed.is_set():  # a late signal is ignored instead of stopping the test session
+            raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGINT, on_sigint)
+    try:
+        ev.reset()
+        twin.reset()
+        actions = np.array([1, 2], np.int32)
+        ev.send(actions)
+        armed.set()
+        threading.Timer(0.02, os.kill, (os.getpid(), signal.SIGINT)).start()
+        with pytest.raises(KeyboardInterrupt):
+            ev.recv()
+        armed.clear()
+        with pytest.raises(RuntimeError, match="in flight"):
+            ev.step(actions)
+        expected = twin.step(actions)
+        got = ev.recv()
+        for name, a, b in zip(("obs", "reward", "terminated", "truncated"), got, expected):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b), err_msg=name)
+        for actions in ([3, 0], [2, 1]):
+            got, expected = ev.step(actions), twin.step(actions)
+            np.testing.assert_array_equal(np.asarray(got[4]["ram"]),
+                                          np.asarray(expected[4]["ram"]))
+        # a reset whose replies were never collected is finished by the next reset()
+        ev.backend.send_reset()
+        assert ev.backend.pending
+        obs, info = ev.reset()
+        np.testing.assert_array_equal(np.asarray(obs), np.asarray(twin.reset()[0]))
+        assert not ev.backend.pending
+    finally:
+        armed.clear()
+        signal.signal(signal.SIGINT, previous)
+        ev.close()
+        twin.close()
+
+
+CHILD = textwrap.dedent("""
+    import sys
+    import numpy as np
+    import stori_jax
+
+    env = stori_jax.make("Breakout", num_envs=2, seed=0, num_workers=2, obs="ram")
+    env.reset()
+    print(" ".join(str(p) for p in env.backend.pids), flush=True)
+    actions = np.zeros(2, np.int32)
+    while True:
+        env.step(actions)
+""")
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(60)
+def test_ctrl_c_exits_and_leaves_no_worker(tmp_path):
+    """A script stepping forever gets Ctrl-C (SIGINT to its whole process group, as a terminal
+    sends it): it exits, and none of its workers survives."""
+    script = tmp_path / "child.py"
+    script.write_text(CHILD)
+    child = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        line = child.stdout.readline()
+        pids = [int(p) for p in line.split()]
+        assert len(pids) == 2, (line, child.stderr.read() if child.poll() is not None else "")
+        time.sleep(0.3)  # let it step a while
+        assert child.poll() is None
+        os.killpg(child.pid, signal.SIGINT)
+        try:
+            child.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            pytest.fail("the child did not exit on SIGINT")
+        stderr = child.stderr.read()
+        assert child.returncode != 0 and "KeyboardInterrupt" in stderr, stderr[-2000:]
+        assert wait_gone(pids, 5.0), [p for p in pids if not process_gone(p)]
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.wait()
+
+
+# ---------------------------------------------------------------------------------------------
+# bad input
+# ---------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def breakout():
+    env = make("Breakout", num_envs=3)
+    env.reset()
+    yield env
+    env.close()
+
+
+@pytest.mark.parametrize("actions", [
+    np.zeros(2, np.int32), np.zeros(4, np.int32), np.zeros((3, 1), np.int32), 0, [[0, 1, 2]],
+])
+def test_wrong_action_shape(breakout, actions):
+    with pytest.raises(ValueError, match=r"\(3,\).*\[0, 3\]"):
+        breakout.step(actions)
+
+
+@pytest.mark.parametrize("actions", [np.zeros(3, np.float32), [0.0, 1.0, 2.0],
+                                     np.array([True, False, True])])
+def test_non_integer_actions(breakout, actions):
+    with pytest.raises(ValueError, match=r"integer.*\(3,\).*\[0, 3\]"):
+        breakout.step(actions)
+
+
+@pytest.mark.parametrize("actions", [[0, 1, 4], [-1, 0, 0], np.array([0, 0, 255], np.uint8)])
+def test_out_of_range_actions(breakout, actions):
+    with pytest.raises(ValueError, match=r"range.*\(3,\).*\[0, 3\]"):
+        breakout.step(actions)
+
+
+def test_valid_actions_of_any_integer_kind_are_accepted(breakout):
+    import jax.numpy as jnp
+
+    for actions in ([0, 1, 3], np.array([3, 2, 1], np.uint8), jnp.array([1, 1, 1], jnp.int32)):
+        obs, reward, terminated, truncated, info = breakout.step(actions)
+        assert obs.shape == (3, 128) and reward.shape == (3,)
+        np.testing.assert_array_equal(np.asarray(info["executed_action"])[:, 0],
+                                      np.asarray(actions))
+
+
+def test_a_rejected_action_leaves_the_env_usable(breakout):
+    with pytest.raises(ValueError):
+        breakout.step([0, 9, 0])
+    obs, *_ = breakout.step([0, 0, 0])
+    assert obs.shape == (3, 128)
+
+
+def test_step_before_reset_and_send_recv_misuse():
+    env = make("Breakout")
+    try:
+        with pytest.raises(RuntimeError, match="reset"):
+            env.step([0, 0])
+        env.reset()
+        with pytest.raises(RuntimeError, match="nothing in flight"):
+            env.recv()
+        env.send([0, 1])
+        with pytest.raises(RuntimeError, match="already in flight"):
+            env.send([0, 1])
+        obs, *_ = env.recv()
+        assert obs.shape == (2, 128)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("kwargs,pattern", [
+    (dict(game="NoSuchGame"), r"unknown game 'NoSuchGame'.*Breakout"),
+    (dict(game="Breakout", preset="9.9"), r"unknown preset '9.9' for Breakout.*3\.2A"),
+    (dict(game="Breakout", obs="rgb"), r"obs must be one of \['raw', 'atari84', 'dreamer64', "
+                                       r"'ram'\], got 'rgb'"),
+    (dict(game="Breakout", num_envs=2, num_workers=3), r"num_workers must be <= num_envs \(2\)"),
+    (dict(game="Breakout", num_workers=0), r"num_workers must be >= 1"),
+    (dict(game="Breakout", num_envs=0), r"num_envs must be >= 1"),
+    (dict(game="Breakout", granularity="episode"),
+     r"granularity must be one of \['frame', 'step'\]"),
+    (dict(game="Breakout", backend="threads"), r"backend must be one of \['subproc', 'envpool'\]"),
+    (dict(game="Breakout", frame_skip=0), r"frame_skip must be >= 1"),
+    (dict(game="Breakout", seed=-1), r"seed must be >= 0"),
+    (dict(game="Breakout", seed=1.5), r"seed must be an int"),
+    (dict(game="Breakout", preset="1", config=Config()), r"either preset or config"),
+    (dict(game="Breakout", config=Config(ram_observation=True), obs="raw"),
+     r"type 0.*obs must be 'ram'"),
+    (dict(game="Breakout", config=Config(observation=ObservationMask("blackout", 1)), obs="ram"),
+     r"obs='ram' cannot show an observation mask"),
+    (dict(game="Breakout", config=Config(observation=ObservationMask("blackout", 12))),
+     r"blackout modes: allowed \[1, 2, .*11\]"),
+    (dict(game="Boxing", config=Config(game="Breakout")), r"bound to game 'Breakout'"),
+])
+def test_bad_make_arguments(kwargs, pattern):
+    kwargs = dict(kwargs)
+    game = kwargs.pop("game")
+    kwargs.setdefault("num_envs", 2)
+    kwargs.setdefault("seed", 0)
+    with pytest.raises(ValueError, match=pattern):
+        stori_jax.make(game, **kwargs)

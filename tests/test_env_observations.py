@@ -1,0 +1,283 @@
+"""Observations through ``stori_jax.make`` on real emulators: every RAM-obs mode (type 3.2 'ram'),
+blackout and crop masks, and the type-0 labelled RAM observation.
+
+Masks are compared with a 3.1 twin (same seed, same actions, ``obs='raw'``): a mask changes the
+observation only, never the game.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pytest
+
+from stori_jax import Config, ObservationMask, get_game
+
+from _env_support import binomial_ok, breakout_tracker, make, random_actions, run_env, run_lockstep
+
+STEPS = 30
+BOXING_RING = (110, 156, 66)
+GOPHER_BEFORE_DUG = (187, 159, 71)
+BANKHEIST_BLUE, BANKHEIST_SCORE = (0, 0, 148), (162, 98, 33)
+BLACK = (0, 0, 0)
+
+
+def actions_of(game, steps=STEPS):
+    return random_actions(get_game(game).num_actions, steps, 2, seed=11)
+
+
+@functools.lru_cache(maxsize=None)
+def twin_run(game, steps=STEPS):
+    env = make(game, obs="raw")
+    try:
+        return run_env(env, actions_of(game, steps))
+    finally:
+        env.close()
+
+
+def masked_run(game, mask, steps=STEPS, granularity="frame"):
+    env = make(game, Config(observation=mask, granularity=granularity), obs="raw")
+    try:
+        return run_env(env, actions_of(game, steps))
+    finally:
+        env.close()
+
+
+def all_obs(run):
+    """(T + 1, B, ...) the reset observation, then every step's."""
+    return np.concatenate([run.reset_obs[None], run.stacked("obs")])
+
+
+def all_masked(run):
+    return np.concatenate([run.reset_info["obs_masked"][None], run.stacked("obs_masked")])
+
+
+def assert_same_game(run, twin):
+    np.testing.assert_array_equal(run.ram, twin.ram)
+    for name in ("reward", "terminated", "truncated", "lives"):
+        np.testing.assert_array_equal(run.stacked(name), twin.stacked(name), err_msg=name)
+
+
+# ---------------------------------------------------------------------------------------------
+# RAM-obs modes: the screen is rendered from modified RAM, the game is untouched
+# ---------------------------------------------------------------------------------------------
+
+RAM_MODES = [("Breakout", m) for m in (1, 2)] + [("Boxing", m) for m in (1, 2, 3)] + \
+            [("Gopher", m) for m in (1, 2, 3, 4, 5)] + [("BankHeist", m) for m in range(1, 7)]
+
+# condition of a mode that applies only when it is met, read from the true RAM after the step
+CONDITIONAL = {
+    ("Gopher", 5): lambda ram: ram[:, 92] != 128,                    # a seed is in the air
+    ("BankHeist", 5): lambda ram: (ram[:, 24:27] == 253).any(-1),    # a bank is shown
+    ("BankHeist", 6): lambda ram: (ram[:, 24:27] == 254).any(-1),    # a police car is shown
+}
+
+
+@pytest.mark.parametrize("game,mode", RAM_MODES)
+def test_ram_obs_mode_changes_the_observation_only(game, mode):
+    run = masked_run(game, ObservationMask("ram", mode, 1.0))
+    twin = twin_run(game)
+    assert_same_game(run, twin)
+    obs, twin_obs, masked = all_obs(run), all_obs(twin), all_masked(run)
+    assert obs.shape == twin_obs.shape == (STEPS + 1, 2, 210, 160, 3) and obs.dtype == np.uint8
+    # where nothing was rendered the observation IS the twin's
+    np.testing.assert_array_equal(obs[~masked], twin_obs[~masked])
+    differs = (obs != twin_obs).any(axis=(2, 3, 4))
+    if (game, mode) in CONDITIONAL:
+        condition = CONDITIONAL[game, mode](run.ram.reshape(-1, 128)).reshape(masked.shape)
+        # met after the step (when the second screen is rendered) => applied
+        assert not (condition & ~masked).any()
+    else:
+        assert masked.all(), "p = 1: every observation is rendered from the modified RAM"
+    if masked.any():
+        assert differs[masked].mean() > 0.5, "the rendered screens should differ from the twin's"
+
+
+def test_ram_obs_mode_renders_the_first_observation_after_an_autoreset():
+    """At p = 1 the first observation of every episode is rendered too: the observation
+    returned with a truncation (max_episode_frames 40 = 10 steps) equals the first reset's."""
+    config = Config(observation=ObservationMask("ram", 2, 1.0))
+    env = make("Boxing", config, obs="raw", max_episode_frames=40)
+    try:
+        run = run_env(env, actions_of("Boxing", 12))
+    finally:
+        env.close()
+    assert all_masked(run).all()
+    truncated = run.stacked("truncated")
+    np.testing.assert_array_equal(truncated[:, 0], np.arange(12) == 9)
+    np.testing.assert_array_equal(run.obs[9], run.reset_obs)
+    assert (run.obs[8] != run.reset_obs).any()
+
+
+def test_boxing_hide_enemy_removes_the_black_boxer():
+    """RAM mode 2 (Boxing 3.2C): the enemy (black, RAM 2) is drawn in the ring colour: no black
+    pixel is left inside the ring, while the twin shows the black boxer there."""
+    run, twin = masked_run("Boxing", ObservationMask("ram", 2, 1.0)), twin_run("Boxing")
+    ring = (slice(None), slice(None), slice(37, 176), slice(33, 127))
+    black = lambda o: (o[ring] == 0).all(-1).sum(axis=(2, 3))  # noqa: E731
+    assert (black(all_obs(twin)) > 20).all()
+    assert (black(all_obs(run)) == 0).all()
+
+
+# ---------------------------------------------------------------------------------------------
+# blackout and crop: exactly the spec's regions, in the spec's fill
+# ---------------------------------------------------------------------------------------------
+
+def region(x0, x1, y0, y1, fill=BLACK):
+    return (x0, x1, y0, y1, fill)
+
+
+# written from STORI_SPEC sections 4-8 (not from the library's tables); painted in order
+SPEC_MASKS = {
+    ("Breakout", "blackout", 1): [region(8, 151, 57, 92), region(7, 152, 189, 195),
+                                  region(2, 158, 3, 16), region(8, 151, 105, 130),
+                                  region(8, 151, 131, 156), region(8, 151, 157, 182)],
+    ("Boxing", "blackout", 1): [region(32, 127, 36, 176, BOXING_RING),
+                                region(87, 134, 1, 16, BOXING_RING),
+                                region(33, 69, 1, 16, BOXING_RING),
+                                region(57, 97, 14, 27, BOXING_RING)],
+    ("Gopher", "blackout", 1): [region(0, 159, 161, 200, GOPHER_BEFORE_DUG),
+                                region(0, 159, 87, 145), region(0, 159, 26, 56),
+                                region(0, 159, 0, 25)] + [
+        region(x0, x1, y0, y1, fill) for x0, x1 in ((0, 59), (100, 159))
+        for y0, y1, fill in ((146, 150, (101, 209, 174)), (151, 155, (117, 231, 194)),
+                             (156, 160, (132, 252, 212)))],
+    ("Gopher", "blackout", 6): [region(0, 159, 164, 200, GOPHER_BEFORE_DUG)],
+    ("BankHeist", "blackout", 1): [region(12, 147, 37, 44), region(12, 15, 37, 177),
+                                   region(12, 147, 173, 177), region(144, 147, 37, 177),
+                                   region(12, 73, 11, 36, BANKHEIST_BLUE),
+                                   region(78, 147, 11, 36, BANKHEIST_BLUE),
+                                   region(12, 147, 178, 186, BANKHEIST_SCORE)],
+    ("Breakout", "crop", 1): [region(0, 79, 0, 209)],
+    ("Boxing", "crop", 3): [region(0, 159, 0, 104)],
+}
+
+
+def expected_mask(regions):
+    hidden = np.zeros((210, 160), bool)
+    fill = np.zeros((210, 160, 3), np.uint8)
+    for x0, x1, y0, y1, colour in regions:
+        hidden[y0:y1 + 1, x0:x1 + 1] = True
+        fill[y0:y1 + 1, x0:x1 + 1] = colour
+    return hidden, fill
+
+
+@pytest.mark.parametrize("game,kind,mode", list(SPEC_MASKS))
+def test_mask_fills_exactly_the_spec_regions(game, kind, mode):
+    steps = 8
+    run = masked_run(game, ObservationMask(kind, mode, 1.0), steps=steps)
+    twin = twin_run(game, steps=steps)
+    assert_same_game(run, twin)
+    hidden, fill = expected_mask(SPEC_MASKS[game, kind, mode])
+    obs, twin_obs = all_obs(run), all_obs(twin)
+    assert all_masked(run).all()
+    np.testing.assert_array_equal(obs[:, :, ~hidden], twin_obs[:, :, ~hidden])
+    np.testing.assert_array_equal(obs[:, :, hidden],
+                                  np.broadcast_to(fill[hidden], obs[:, :, hidden].shape))
+    # the region did hide something
+    assert (twin_obs[:, :, hidden] != fill[hidden]).any()
+
+
+def torch_centres(seen, hidden):
+    """Integer centres (x, y) of a radius-75 disc containing every ``seen`` pixel and no
+    ``hidden`` one."""
+    ys, xs = np.mgrid[:210, :160]
+    cx, cy = xs.ravel(), ys.ravel()
+
+    def max_dist2(points):  # (210*160,) max squared distance from each centre to ``points``
+        out = np.zeros(cx.shape, np.int64)
+        for y, x in points:
+            np.maximum(out, (cx - x) ** 2 + (cy - y) ** 2, out=out)
+        return out
+
+    # the farthest seen pixel from any centre is one of each row's two extreme seen pixels
+    rows = [(y, x) for y in np.unique(np.nonzero(seen)[0])
+            for x in (np.nonzero(seen[y])[0].min(), np.nonzero(seen[y])[0].max())]
+    ok = max_dist2(rows) <= 75 ** 2
+    hy, hx = np.nonzero(hidden)
+    for i in np.nonzero(ok)[0]:
+        if ((hx - cx[i]) ** 2 + (hy - cy[i]) ** 2 <= 75 ** 2).any():
+            ok[i] = False
+    return np.stack([cx[ok], cy[ok]], -1)
+
+
+def test_torch_shows_a_disc_of_radius_75_and_blacks_out_the_rest():
+    """Crop mode 5 at step granularity (one centre for both screens): the observation is the
+    twin's inside a disc of radius 75 and black outside it."""
+    steps = 5
+    run = masked_run("Breakout", ObservationMask("crop", 5, 1.0), steps=steps, granularity="step")
+    twin = twin_run("Breakout", steps=steps)  # 3.1 is the same game at either granularity
+    assert_same_game(run, twin)
+    obs, twin_obs = all_obs(run), all_obs(twin)
+    assert all_masked(run).all()
+    for t in range(steps + 1):
+        for b in range(2):
+            o, w = obs[t, b], twin_obs[t, b]
+            kept = (o == w).all(-1)
+            black = (o == 0).all(-1)
+            assert (black | kept).all(), "a pixel is the twin's or black"
+            # outside the disc everything is black: at least the screen minus the largest disc
+            assert black.sum() >= 210 * 160 - (np.pi * 75 ** 2 + 2 * np.pi * 75 + 1)
+            seen, hidden = kept & (w != 0).any(-1), ~kept
+            assert seen.any() and hidden.any()
+            assert len(torch_centres(seen, hidden)), f"no disc explains step {t}, env {b}"
+
+
+def test_mask_at_step_granularity_applies_per_step_with_probability_p():
+    steps = 60
+    mask = ObservationMask("blackout", 9, 0.5)  # Boxing 3.2A's regions (scores + clock)
+    run = masked_run("Boxing", mask, steps=steps, granularity="step")
+    twin = twin_run("Boxing", steps=steps)
+    assert_same_game(run, twin)
+    hidden, fill = expected_mask([region(87, 134, 1, 16, BOXING_RING),
+                                  region(33, 69, 1, 16, BOXING_RING),
+                                  region(57, 97, 14, 27, BOXING_RING)])
+    obs, twin_obs, masked = all_obs(run), all_obs(twin), all_masked(run)
+    np.testing.assert_array_equal(obs[~masked], twin_obs[~masked])
+    np.testing.assert_array_equal(obs[masked][:, hidden],
+                                  np.broadcast_to(fill[hidden], obs[masked][:, hidden].shape))
+    np.testing.assert_array_equal(obs[masked][:, ~hidden], twin_obs[masked][:, ~hidden])
+    assert binomial_ok(int(masked.sum()), masked.size, 0.5)
+
+
+# ---------------------------------------------------------------------------------------------
+# type 0: the RAM observation and its labels
+# ---------------------------------------------------------------------------------------------
+
+def test_type0_observation_is_the_ram_with_labels():
+    env = make("Breakout", Config(ram_observation=True), obs=None)
+    try:
+        assert env.observation_space.shape == (2, 128)
+        run = run_lockstep([env], 200, lambda k, runs: breakout_tracker(
+            runs[0].info[-1]["ram"] if runs[0].info else runs[0].reset_info["ram"]))[0]
+    finally:
+        env.close()
+    obs = all_obs(run)
+    assert obs.shape == (201, 2, 128) and obs.dtype == np.uint8
+    np.testing.assert_array_equal(obs, run.ram)
+    labels = {k: np.stack([run.reset_info["labels"][k]] + [i["labels"][k] for i in run.info])
+              for k in run.reset_info["labels"]}
+    assert {"ball_x", "ball_y", "player_x", "score"} <= set(labels)
+    np.testing.assert_array_equal(labels["ball_x"], run.ram[..., 99])
+    np.testing.assert_array_equal(labels["ball_y"], run.ram[..., 101])
+    np.testing.assert_array_equal(labels["player_x"], run.ram[..., 72])
+    # the corrected score label (BCD in RAM 76, 77) is the running sum of rewards
+    returns = np.concatenate([np.zeros((1, 2)), np.cumsum(run.stacked("reward"), 0)])
+    assert not run.done.any() and returns[-1].min() > 0
+    np.testing.assert_array_equal(labels["score"], returns)
+
+
+def test_type0_boxing_labels_follow_the_scores():
+    env = make("Boxing", Config(ram_observation=True))
+    try:
+        run = run_env(env, random_actions(18, 150, 2, seed=12))
+    finally:
+        env.close()
+    labels = run.info[-1]["labels"]
+    ram = run.info[-1]["ram"].astype(int)
+    assert labels["player_x"].tolist() == ram[:, 32].tolist()
+    assert labels["enemy_y"].tolist() == ram[:, 35].tolist()
+    returns = run.stacked("reward").sum(0)
+    np.testing.assert_array_equal(labels["player_score"] - labels["enemy_score"], returns)
+    assert (labels["enemy_score"] > 0).any()
