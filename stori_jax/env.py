@@ -12,7 +12,8 @@ import numpy as np
 
 from stori_jax.backends.subproc import EnvClosedError, SubprocBackend
 from stori_jax.config import Config, GRANULARITIES
-from stori_jax.core import after_step, before_step, initial_state
+from stori_jax.core import (Draws, WorkerOutputs, after_step, before_step, initial_state,
+                            push_frames)
 from stori_jax.games import get_game
 from stori_jax.plan import OBS_KINDS, Plan, compile_plan
 from stori_jax.presets import preset as get_preset
@@ -156,6 +157,7 @@ class Env:
         self.single_observation_space = gym.spaces.Box(0, 255, self.observation_space.shape[1:],
                                                        np.uint8)
         self._jit_plan = jit_key(plan)
+        self._zero_draws = None
         self._state = initial_state(plan, seed)
         self._in_flight = None
         self._needs_reset = True
@@ -196,17 +198,14 @@ class Env:
         zeros = jnp.zeros((self.num_envs,), jnp.int32)
         state = self._state._replace(episode_step=zeros, prev_executed=zeros)
         state, draws = before_step(self._jit_plan, state, zeros, resetting=True)
-        views = self.backend.views
-        self._write_inputs(views, draws, reset_first=None)
+        self._write_inputs(self.backend.views, draws, reset_first=None)
         self.backend.send_reset()
         out = self.backend.recv()
         self._needs_reset = False
         self._reset_pending[:] = False
-        new_episode = np.ones(self.num_envs, bool)
-        obs, info = self._finish(state, draws, out, new_episode)
+        everyone = np.ones(self.num_envs, bool)
+        obs, _, _, _, info = self._finish(state, draws, out, everyone, everyone)
         return obs, info
-
-    # -- step -----------------------------------------------------------------------------------
 
     def validate_actions(self, actions) -> np.ndarray:
         """Host-side check: shape (B,), integer dtype, values in [0, num_actions)."""
@@ -232,35 +231,26 @@ class Env:
         if self._in_flight is not None:
             raise RuntimeError("a step is already in flight: call recv() before send() again")
         a = self.validate_actions(actions)
-        state, draws = before_step(self._jit_plan, self._state, a)
+        if self._deterministic_before_step:
+            state, draws = self._state, self._host_draws(a)
+        else:
+            state, draws = before_step(self._jit_plan, self._state, a)
         self._write_inputs(self.backend.views, draws, reset_first=self._reset_pending)
         self.backend.send_step()
-        self._in_flight = (state, draws, a, self._reset_pending.copy())
+        self._in_flight = (state, draws, self._reset_pending.copy())
 
     def recv(self):
         """Finish the step started by :meth:`send`: (obs, reward, terminated, truncated, info)."""
         self._check_open()
         if self._in_flight is None:
             raise RuntimeError("nothing in flight: call send(actions) first")
-        state, draws, actions, was_reset = self._in_flight
+        state, draws, was_reset = self._in_flight
         out = self.backend.recv()  # if interrupted (Ctrl-C), the step stays in flight
         self._in_flight = None
-        terminated = out["terminated"].astype(bool)
-        truncated = out["truncated"].astype(bool)
-        done = terminated | truncated
+        done = (out["terminated"] | out["truncated"]).astype(bool)
         new_episode = was_reset | (done if self.plan.autoreset else False)
-        self._reset_pending = np.zeros(self.num_envs, bool) if self.plan.autoreset else done.copy()
-        obs, info = self._finish(state, draws, out, new_episode)
-        per_slot = self.plan.per_frame
-        info["executed_action"] = draws.executed_slots if per_slot else draws.executed_slots[:, 0]
-        info["action_corrupted"] = draws.corrupted if per_slot else draws.corrupted[:, 0]
-        info["event_fired"] = jnp.asarray(out["event_fired"].copy())
-        info["concept"] = draws.concept
-        info["episode_return"] = jnp.asarray(out["episode_return"].copy())
-        info["episode_length"] = jnp.asarray(out["episode_length"].copy())
-        info["reset_step"] = jnp.asarray(was_reset)
-        reward = jnp.asarray(out["reward"].copy())
-        return obs, reward, jnp.asarray(terminated), jnp.asarray(truncated), info
+        self._reset_pending = np.zeros(self.num_envs, bool) if self.plan.autoreset else done
+        return self._finish(state, draws, out, new_episode, was_reset)
 
     def step(self, actions):
         """One agent step of every env: (obs, reward, terminated, truncated, info)."""
@@ -269,6 +259,30 @@ class Env:
 
     # -- internals ------------------------------------------------------------------------------
 
+    @property
+    def _deterministic_before_step(self) -> bool:
+        """Nothing random happens before the emulators run: skip the JAX call."""
+        p = self.plan
+        return (p.noise is None and p.event is None and p.mask is None
+                and p.drift_schedule is None and p.noop_max == 0)
+
+    def _host_draws(self, actions: np.ndarray) -> Draws:
+        """The Draws of a step without randomness, built on the host (numpy)."""
+        b, skip = self.num_envs, self.plan.frame_skip
+        if self._zero_draws is None:
+            self._zero_draws = Draws(
+                executed=None, executed_slots=None, corrupted=np.zeros((b, 1), bool),
+                event_u=np.ones((b, skip, 2), np.float32), event_active=np.zeros(b, np.uint8),
+                ram_render=np.zeros(b, np.uint8), noops=np.zeros(b, np.int32),
+                concept=np.zeros(b, np.int32), mask_apply=np.zeros((b, 2), bool),
+                mask_centres=np.zeros((b, 2, 2), np.int32), step_active=np.zeros(b, bool))
+        slots = actions[:, None]
+        if self.plan.per_frame:
+            slots = np.repeat(slots, skip, axis=1)
+        return self._zero_draws._replace(
+            executed=np.repeat(actions[:, None], skip, axis=1), executed_slots=slots,
+            corrupted=np.zeros(slots.shape, bool))
+
     def _write_inputs(self, views, draws, reset_first) -> None:
         host = jax.device_get((draws.executed, draws.event_u, draws.event_active,
                                draws.ram_render, draws.noops))
@@ -276,17 +290,17 @@ class Env:
          views["ram_render"][...], views["noops"][...]) = host
         views["reset_first"][...] = 0 if reset_first is None else reset_first
 
-    def _finish(self, state, draws, out, new_episode):
-        state, obs, masked, labels = after_step(
-            self._jit_plan, state, draws, out["frames"], out["ram"].copy(),
-            out["ram_rendered"].copy(), jnp.asarray(new_episode))
+    def _finish(self, state, draws, out, new_episode, reset_step):
+        outputs = WorkerOutputs(**{name: out[name] for name in WorkerOutputs._fields})
+        state, obs, reward, terminated, truncated, info = after_step(
+            self._jit_plan, state, draws, outputs, new_episode, reset_step)
+        if self.plan.obs == "atari84":
+            obs = push_frames(state.stack, obs, new_episode)
+            state = state._replace(stack=obs)
         # the workers overwrite their buffers on the next send: finish reading them now
-        obs = jax.block_until_ready(obs)
+        jax.block_until_ready((obs, reward, info))
         self._state = state
-        info = {"obs_masked": masked, "lives": jnp.asarray(out["lives"].copy()),
-                "ram": jnp.asarray(out["ram"].copy()), "labels": labels,
-                "concept": jnp.zeros((self.num_envs,), jnp.int32)}
-        return obs, info
+        return obs, reward, terminated, truncated, info
 
     def __repr__(self):
         return (f"Env({self.plan.game}, {self.config.describe()}, num_envs={self.num_envs}, "

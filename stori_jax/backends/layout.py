@@ -30,7 +30,7 @@ def buffer_specs(num_envs: int, frame_skip: int) -> dict[str, tuple[tuple[int, .
         "noops": ((b,), np.int32),                     # no-op frames after a reset
         "reset_first": ((b,), np.uint8),               # reset this env instead of stepping it
         # workers -> parent
-        "frames": ((b, 2) + SCREEN, np.uint8),         # the last two screens
+        "frames": ((2, b) + SCREEN, np.uint8),         # the last two screens, slot-major
         "ram": ((b, RAM_SIZE), np.uint8),
         "reward": ((b,), np.float32),
         "terminated": ((b,), np.uint8),

@@ -198,7 +198,7 @@ class SubprocBackend:
             raise RuntimeError("nothing in flight: call send_step() or send_reset() first")
         self._wait_all("a step")
         if self.frames_layout == "pooled":
-            return dict(self.views, frames=self.views["frames"][:, 0])
+            return dict(self.views, frames=self.views["frames"][0])  # contiguous (B, H, W, 3)
         return self.views
 
     def close(self) -> None:

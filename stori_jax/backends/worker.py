@@ -60,7 +60,7 @@ class Emulator:
         self.ram_obs = game.ram_obs_modes[spec.ram_obs_mode] if spec.ram_obs_mode is not None else None
         self.v = views
         self.ram = views["ram"][index]          # true RAM, written in place
-        self.frames = views["frames"][index]    # (2, 210, 160, 3)
+        self.frames = views["frames"][:, index]  # (2, 210, 160, 3), each slot contiguous
         self.prev_ram = np.zeros(128, np.uint8)
         self.start_ram = np.zeros(128, np.uint8)
 

@@ -74,11 +74,11 @@ def area_resize(image, height: int, width: int, *, y_axis: int, x_axis: int):
 
 
 def pool_screens(frames, layout: str = "pair"):
-    """The observed screen (B, 210, 160, 3) from a backend's frames: ``pair`` (B, 2, H, W, 3)
-    is max-pooled here, ``pooled`` (B, H, W, 3) was pooled by the backend, ``pooled_chw``
+    """The observed screen (B, 210, 160, 3) from a backend's frames: ``pair`` (2, B, H, W, 3)
+    (slot-major, as the workers write them) is max-pooled here, ``pooled`` (B, H, W, 3) was pooled by the backend, ``pooled_chw``
     (B, 3, H, W) is transposed."""
     if layout == "pair":
-        return max_pool(frames)
+        return jnp.maximum(frames[0], frames[1])
     if layout == "pooled":
         return frames
     if layout == "pooled_chw":
