@@ -48,7 +48,8 @@ def resolve_config(game: str, preset: str | None, config: Config | None) -> Conf
 def make(game: str, preset: str | None = None, *, config: Config | None = None,
          num_envs: int, seed: int, backend: str = "subproc", num_workers: int | None = None,
          obs: str | None = None, frame_skip: int = 4, granularity: str | None = None,
-         max_episode_frames: int = 108000, noop_max: int = 0, autoreset: bool = True) -> "Env":
+         max_episode_frames: int = 108000, noop_max: int = 0, autoreset: bool = True,
+         inline_envs: int | None = None) -> "Env":
     """A batched STORI environment of ``num_envs`` emulators.
 
     ``preset``: a paper preset name of ``game`` (see ``stori_jax.list_presets()``), or ``config``:
@@ -58,6 +59,11 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
     overrides the config's (``frame``: perturbations per emulator frame, as the reference;
     ``step``: once per agent step).  With ``autoreset`` (default) an env whose episode ended
     returns the first observation of its next episode in the same step.
+
+    ``num_workers`` emulator processes share the batch; ``inline_envs`` envs are emulated in
+    this process itself while the workers run theirs.  By default (both None) there is one
+    worker per core but one, and this process takes an equal share: every core emulates, and
+    nothing waits on a process switch (see benchmarks/README.md).
     """
     spec = get_game(game)
     cfg = resolve_config(game, preset, config)
@@ -91,12 +97,17 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
         plan = dataclasses.replace(plan, frames_layout=FRAMES_LAYOUT)
         # raises a clear ValueError naming what needs the subproc backend
         return Env(plan, cfg, seed, make_envpool_backend(plan, seed, max_episode_frames))
-    cores = _available_cores()
+    inline_envs = _check_int("inline_envs", inline_envs, 0) if inline_envs is not None else None
     if num_workers is None:
-        num_workers = min(cores, num_envs)
+        num_workers, default_inline = default_split(num_envs, _available_cores())
+        inline_envs = default_inline if inline_envs is None else inline_envs
+    inline_envs = inline_envs or 0
     num_workers = _check_int("num_workers", num_workers, 1)
     if num_workers > num_envs:
         raise ValueError(f"num_workers must be <= num_envs ({num_envs}), got {num_workers}")
+    if num_workers + inline_envs > num_envs:
+        raise ValueError(f"num_workers ({num_workers}) + inline_envs ({inline_envs}) must be "
+                         f"<= num_envs ({num_envs}): every worker needs at least one env")
     wants_screens = obs != "ram"
     pool_in_workers = wants_screens and not plan.needs_both_screens
     plan = dataclasses.replace(plan, frames_layout="pooled" if pool_in_workers else "pair")
@@ -107,7 +118,8 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
         event_mode=event.mode if event else None, event_prob=event.prob if event else 0.0,
         ram_obs_mode=mask.mode if mask is not None and mask.kind == "ram" else None,
         want_screens=wants_screens, max_episode_frames=max_episode_frames,
-        autoreset=plan.autoreset, pool_screens=pool_in_workers)
+        autoreset=plan.autoreset, pool_screens=pool_in_workers,
+        inline_envs=inline_envs)
     return Env(plan, cfg, seed, worker_backend)
 
 
@@ -119,6 +131,14 @@ def jit_key(plan: Plan) -> Plan:
     if plan.mask is not None and plan.mask.kind == "ram":
         plan = dataclasses.replace(plan, mask=dataclasses.replace(plan.mask, mode=0))
     return plan
+
+
+def default_split(num_envs: int, cores: int) -> tuple[int, int]:
+    """(worker processes, envs emulated in this process) for a batch on ``cores`` cores."""
+    if cores < 2 or num_envs < 2:
+        return 1, 0
+    workers = min(cores - 1, num_envs - 1)
+    return workers, num_envs // (workers + 1)
 
 
 def _available_cores() -> int:

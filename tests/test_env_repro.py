@@ -27,10 +27,11 @@ CASES = {
 }
 
 
-def _run(name, seed, num_workers, num_envs=NUM_ENVS):
+def _run(name, seed, num_workers, num_envs=NUM_ENVS, inline_envs=0):
     case = dict(CASES[name])
     game = case.pop("game")
-    env = make(game, num_envs=num_envs, seed=seed, num_workers=num_workers, **case)
+    env = make(game, num_envs=num_envs, seed=seed, num_workers=num_workers,
+               inline_envs=inline_envs, **case)
     try:
         actions = random_actions(get_game(game).num_actions, NUM_STEPS, NUM_ENVS, seed=123)
         return run_env(env, actions[:, :num_envs])
@@ -71,6 +72,9 @@ def test_same_seed_is_bit_identical_across_runs_and_worker_counts(name):
     for workers in (2, 4):
         _assert_identical(first, _run(name, seed=7, num_workers=workers),
                           f"{name}: 1 vs {workers} workers")
+    # some envs emulated in this process while one worker runs the others
+    _assert_identical(first, _run(name, seed=7, num_workers=1, inline_envs=2),
+                      f"{name}: 1 worker vs 1 worker + 2 inline envs")
     # the run is genuinely random: every case corrupts actions, and some did in these steps
     assert first.stacked("action_corrupted").any(), name
 

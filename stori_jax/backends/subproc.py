@@ -88,21 +88,35 @@ class SubprocBackend:
     def __init__(self, *, game: str, seeds: list[int], num_workers: int, frame_skip: int,
                  per_frame: bool, event_mode: int | None, event_prob: float,
                  ram_obs_mode: int | None, want_screens: bool, max_episode_frames: int,
-                 autoreset: bool = True, pool_screens: bool = False):
+                 autoreset: bool = True, pool_screens: bool = False, inline_envs: int = 0):
         num_envs = len(seeds)
         self.frames_layout = "pooled" if pool_screens else "pair"
         ctx = mp.get_context("spawn")
         self.buffers = SharedBuffers.allocate(ctx, num_envs, frame_skip)
         self.views = self.buffers.views()
-        self.ranges = split_batch(num_envs, num_workers)
+        if not 0 <= inline_envs < num_envs:
+            raise ValueError(f"inline_envs must be in [0, num_envs - 1], got {inline_envs}")
+        self.ranges = [(lo + inline_envs, hi + inline_envs)
+                       for lo, hi in split_batch(num_envs - inline_envs, num_workers)]
         self.processes, self.conns = [], []
         self._finalizer = weakref.finalize(self, _shutdown, self.processes, self.conns)
-        for lo, hi in self.ranges:
-            spec = WorkerSpec(game=game, env_lo=lo, env_hi=hi, seeds=tuple(seeds[lo:hi]),
+
+        def spec_for(lo, hi):
+            return WorkerSpec(game=game, env_lo=lo, env_hi=hi, seeds=tuple(seeds[lo:hi]),
                               frame_skip=frame_skip, per_frame=per_frame, event_mode=event_mode,
                               event_prob=event_prob, ram_obs_mode=ram_obs_mode,
                               want_screens=want_screens, max_episode_frames=max_episode_frames,
                               autoreset=autoreset, pool_screens=pool_screens)
+
+        # envs 0..inline_envs-1 are emulated in this process, while the workers run theirs
+        self._inline = []
+        if inline_envs:
+            from stori_jax.backends.worker import make_emulators
+
+            self._inline = make_emulators(spec_for(0, inline_envs), self.views)
+        self._inline_command, self._inline_next = None, 0
+        for lo, hi in self.ranges:
+            spec = spec_for(lo, hi)
             parent_conn, child_conn = ctx.Pipe(duplex=True)
             process = ctx.Process(target=worker_main, daemon=True,
                                   args=(spec, self.buffers, child_conn, os.getpid()),
@@ -186,9 +200,11 @@ class SubprocBackend:
 
     def send_reset(self) -> None:
         self._send_all(b"R")
+        self._inline_command = b"R"
 
     def send_step(self) -> None:
         self._send_all(b"S")
+        self._inline_command = b"S"
 
     def recv(self) -> dict[str, np.ndarray]:
         """Wait for the workers; the returned views stay valid until the next send."""
@@ -196,6 +212,13 @@ class SubprocBackend:
             raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
         if not self._pending:
             raise RuntimeError("nothing in flight: call send_step() or send_reset() first")
+        if self._inline_command is not None:
+            # one emulator at a time, so that an interrupted recv() resumes where it stopped
+            while self._inline_next < len(self._inline):
+                emulator = self._inline[self._inline_next]
+                emulator.step() if self._inline_command == b"S" else emulator.reset()
+                self._inline_next += 1
+            self._inline_command, self._inline_next = None, 0
         self._wait_all("a step")
         if self.frames_layout == "pooled":
             return dict(self.views, frames=self.views["frames"][0])  # contiguous (B, H, W, 3)

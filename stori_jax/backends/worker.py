@@ -189,6 +189,14 @@ class Emulator:
             v["lives"][i] = ale.lives()
 
 
+def make_emulators(spec: WorkerSpec, views: dict) -> list[Emulator]:
+    from stori_jax.games import get_game
+
+    game = get_game(spec.game)
+    return [Emulator(spec, game, seed, i, views)
+            for i, seed in zip(range(spec.env_lo, spec.env_hi), spec.seeds)]
+
+
 def _die_with_parent() -> None:
     """Ask Linux to kill this worker if the parent dies (no orphans after a hard kill)."""
     try:
@@ -207,12 +215,7 @@ def worker_main(spec: WorkerSpec, buffers, conn, parent_pid: int) -> None:
     if os.getppid() != parent_pid:
         return
     try:
-        from stori_jax.games import get_game
-
-        game = get_game(spec.game)
-        views = buffers.views()
-        emulators = [Emulator(spec, game, seed, i, views)
-                     for i, seed in zip(range(spec.env_lo, spec.env_hi), spec.seeds)]
+        emulators = make_emulators(spec, buffers.views())
         conn.send_bytes(b"K")
     except BaseException:
         conn.send_bytes(b"E" + traceback.format_exc().encode())
