@@ -23,6 +23,7 @@ _LAZY = {
     "Trajectory": ("stori_jax.rollout", "Trajectory"),
     "WorkerError": ("stori_jax.backends.subproc", "WorkerError"),
     "EnvClosedError": ("stori_jax.backends.subproc", "EnvClosedError"),
+    "InterruptedStepError": ("stori_jax.backends.subproc", "InterruptedStepError"),
     "functional": ("stori_jax.functional", None),
 }
 

@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from stori_jax.backends.subproc import EnvClosedError, SubprocBackend
+from stori_jax.backends.subproc import EnvClosedError, InterruptedStepError, SubprocBackend
 from stori_jax.config import Config, GRANULARITIES
 from stori_jax.core import (Draws, WorkerOutputs, after_step, before_step, initial_state,
                             push_frames)
@@ -213,7 +213,10 @@ class Env:
         """Reset every env. Returns (obs, info)."""
         self._check_open()
         if self._in_flight is not None or getattr(self.backend, "pending", False):
-            self.backend.recv()  # finish a step (or an interrupted reset) still in flight
+            try:
+                self.backend.recv()  # finish a step (or an interrupted reset) still in flight
+            except InterruptedStepError:
+                pass  # the reset below starts every emulator afresh
             self._in_flight = None
         zeros = jnp.zeros((self.num_envs,), jnp.int32)
         state = self._state._replace(episode_step=zeros, prev_executed=zeros)
@@ -247,7 +250,8 @@ class Env:
         """Start one step of every env with ``actions`` (B,) ints."""
         self._check_open()
         if self._needs_reset:
-            raise RuntimeError("call reset() before the first step")
+            raise RuntimeError("call reset() first (before the first step, and after an "
+                               "interrupted step)")
         if self._in_flight is not None:
             raise RuntimeError("a step is already in flight: call recv() before send() again")
         a = self.validate_actions(actions)
@@ -265,7 +269,11 @@ class Env:
         if self._in_flight is None:
             raise RuntimeError("nothing in flight: call send(actions) first")
         state, draws, was_reset = self._in_flight
-        out = self.backend.recv()  # if interrupted (Ctrl-C), the step stays in flight
+        try:
+            out = self.backend.recv()  # if interrupted (Ctrl-C), the step stays in flight
+        except InterruptedStepError:
+            self._in_flight, self._needs_reset = None, True
+            raise
         self._in_flight = None
         done = (out["terminated"] | out["truncated"]).astype(bool)
         new_episode = was_reset | (done if self.plan.autoreset else False)

@@ -275,3 +275,33 @@ def test_bad_make_arguments(kwargs, pattern):
     kwargs.setdefault("seed", 0)
     with pytest.raises(ValueError, match=pattern):
         stori_jax.make(game, **kwargs)
+
+
+def test_an_interrupt_inside_inline_emulation_requires_a_reset():
+    """Envs emulated in this process cannot resume half a frame loop: a Ctrl-C there makes
+    the step fail clearly and the env usable again after reset()."""
+    import stori_jax
+
+    env = stori_jax.make("Breakout", num_envs=3, seed=0, obs="ram", num_workers=1,
+                         inline_envs=2)
+    try:
+        env.reset()
+        emulator = env.backend._inline[1]
+        real_step = emulator.step
+
+        def interrupted():
+            raise KeyboardInterrupt
+
+        emulator.step = interrupted
+        with pytest.raises(KeyboardInterrupt):
+            env.step(np.zeros(3, np.int32))
+        emulator.step = real_step
+        with pytest.raises(stori_jax.InterruptedStepError, match="call reset"):
+            env.recv()
+        with pytest.raises(RuntimeError, match=r"call reset\(\) first"):
+            env.step(np.zeros(3, np.int32))
+        env.reset()
+        obs, *_ = env.step(np.zeros(3, np.int32))
+        assert obs.shape == (3, 128)
+    finally:
+        env.close()

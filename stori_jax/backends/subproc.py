@@ -24,6 +24,10 @@ class WorkerError(RuntimeError):
     """An emulator worker died or failed."""
 
 
+class InterruptedStepError(RuntimeError):
+    """A step was interrupted inside emulation; the env needs reset()."""
+
+
 class EnvClosedError(RuntimeError):
     """The environment was used after close()."""
 
@@ -114,7 +118,7 @@ class SubprocBackend:
             from stori_jax.backends.worker import make_emulators
 
             self._inline = make_emulators(spec_for(0, inline_envs), self.views)
-        self._inline_command, self._inline_next = None, 0
+        self._inline_command, self._inline_next, self._inline_broken = None, 0, None
         for lo, hi in self.ranges:
             spec = spec_for(lo, hi)
             parent_conn, child_conn = ctx.Pipe(duplex=True)
@@ -212,14 +216,25 @@ class SubprocBackend:
             raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
         if not self._pending:
             raise RuntimeError("nothing in flight: call send_step() or send_reset() first")
-        if self._inline_command is not None:
+        if self._inline_command is not None and self._inline_broken is None:
             # one emulator at a time, so that an interrupted recv() resumes where it stopped
             while self._inline_next < len(self._inline):
                 emulator = self._inline[self._inline_next]
-                emulator.step() if self._inline_command == b"S" else emulator.reset()
+                try:
+                    emulator.step() if self._inline_command == b"S" else emulator.reset()
+                except BaseException:
+                    # stopped inside an emulator's frame loop: its state is half a step
+                    self._inline_broken = emulator.i
+                    raise
                 self._inline_next += 1
             self._inline_command, self._inline_next = None, 0
         self._wait_all("a step")
+        if self._inline_broken is not None:
+            env, self._inline_broken = self._inline_broken, None
+            self._inline_command, self._inline_next = None, 0
+            raise InterruptedStepError(
+                f"a step was interrupted while env {env} was being emulated in this process; "
+                "its emulator is half a step ahead: call reset() before stepping again")
         if self.frames_layout == "pooled":
             return dict(self.views, frames=self.views["frames"][0])  # contiguous (B, H, W, 3)
         return self.views
