@@ -10,6 +10,7 @@ import jax
 import numpy as np
 
 import stori_jax
+from ale_py import ALEInterface, LoggerMode, roms
 
 # Breakout's minimal action set and the RAM addresses a ball-tracking policy needs
 NOOP, FIRE, RIGHT, LEFT = 0, 1, 2, 3
@@ -126,3 +127,13 @@ def process_gone(pid: int) -> bool:
     except ProcessLookupError:
         return True
     return False
+
+
+def new_ale(rom_id: str, seed: int = 0) -> ALEInterface:
+    """A bare ale-py emulator of ``rom_id`` (no sticky actions), for tests on real frames/RAM."""
+    ALEInterface.setLoggerMode(LoggerMode.Error)
+    ale = ALEInterface()
+    ale.setInt("random_seed", seed)
+    ale.setFloat("repeat_action_probability", 0.0)
+    ale.loadROM(roms.get_rom_path(rom_id))
+    return ale

@@ -9,6 +9,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from _env_support import new_ale
+
 from stori_jax import get_game
 from stori_jax.functional import extract_labels
 
@@ -17,13 +19,8 @@ FIRE, RIGHT, LEFT, NOOP = 1, 2, 3, 0
 BALL_X, PADDLE_X = 99, 72
 
 
-def new_ale(rom_id):
-    ale_py = pytest.importorskip("ale_py")
-    ale_py.ALEInterface.setLoggerMode(ale_py.LoggerMode.Error)
-    ale = ale_py.ALEInterface()
-    ale.setInt("random_seed", 0)
-    ale.setFloat("repeat_action_probability", 0.0)
-    ale.loadROM(ale_py.roms.get_rom_path(rom_id))
+def ale_and_actions(rom_id):
+    ale = new_ale(rom_id)
     return ale, ale.getMinimalActionSet()
 
 
@@ -31,7 +28,7 @@ def new_ale(rom_id):
 def breakout_play(frames: int = 4000):
     """Play Breakout by tracking the ball from RAM; (RAM after every frame (N, 128) uint8,
     running sum of act() rewards after every frame (N,))."""
-    ale, actions = new_ale("breakout")
+    ale, actions = ale_and_actions("breakout")
     assert [a.name for a in actions] == ["NOOP", "FIRE", "RIGHT", "LEFT"]
     rams, totals = [], []
     total, lives, launch = 0, ale.lives(), True
@@ -85,7 +82,7 @@ def test_breakout_score_label_bcd_synthetic():
 def test_score_labels_track_reward_on_real_ram(rom_id, frames):
     """Boxing: reward = change of player - enemy score; Gopher: reward = change of the score."""
     game = get_game(rom_id)
-    ale, actions = new_ale(rom_id)
+    ale, actions = ale_and_actions(rom_id)
     rng = np.random.default_rng(0)
     rams, totals, total = [], [], 0
     for _ in range(frames):

@@ -13,6 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from _env_support import new_ale
+
 from stori_jax import get_game
 from stori_jax.functional import apply_masks, draw_mask_decisions, region_mask, torch_mask
 from stori_jax.functional.masks import CROP_REGIONS, TORCH_MODE, TORCH_RADIUS
@@ -103,12 +105,7 @@ APPLY = np.array([[True, True], [True, False], [False, True], [False, False]])
 @functools.lru_cache(maxsize=None)
 def real_screens(rom_id: str, n: int = 8) -> np.ndarray:
     """``n`` real RGB screens (n, 210, 160, 3) of ``rom_id`` under random play (seeded)."""
-    ale_py = pytest.importorskip("ale_py")
-    ale_py.ALEInterface.setLoggerMode(ale_py.LoggerMode.Error)
-    ale = ale_py.ALEInterface()
-    ale.setInt("random_seed", 0)
-    ale.setFloat("repeat_action_probability", 0.0)
-    ale.loadROM(ale_py.roms.get_rom_path(rom_id))
+    ale = new_ale(rom_id)
     actions = ale.getMinimalActionSet()
     rng = np.random.default_rng(0)
     screens = []

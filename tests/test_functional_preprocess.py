@@ -9,6 +9,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from _env_support import new_ale
+
 from stori_jax.functional import (atari84_frame, dreamer64, max_pool, push_frame, reset_stack,
                                   to_gray)
 from stori_jax.functional.preprocess import area_resize
@@ -24,12 +26,7 @@ RESIZE = jax.jit(area_resize, static_argnums=(1, 2), static_argnames=("y_axis", 
 
 @functools.lru_cache(maxsize=None)
 def real_screens(n: int = 4) -> np.ndarray:
-    ale_py = pytest.importorskip("ale_py")
-    ale_py.ALEInterface.setLoggerMode(ale_py.LoggerMode.Error)
-    ale = ale_py.ALEInterface()
-    ale.setInt("random_seed", 0)
-    ale.setFloat("repeat_action_probability", 0.0)
-    ale.loadROM(ale_py.roms.get_rom_path("bank_heist"))
+    ale = new_ale("bank_heist")
     actions = ale.getMinimalActionSet()
     rng = np.random.default_rng(0)
     screens = []
