@@ -58,7 +58,7 @@ def test_vector_env_next_step_autoreset():
         assert obs.shape == (2, 128)
         first_ram = obs.copy()
         rng = np.random.default_rng(0)
-        done_at = None
+        done_at = done_env = None
         for t in range(3000):
             obs, reward, terminated, truncated, info = envs.step(rng.integers(0, 4, 2))
             if done_at is not None:
