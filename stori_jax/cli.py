@@ -1,10 +1,12 @@
-"""The ``stori-jax`` command line: ``run`` a preset with a random policy, ``list`` what exists."""
+"""The ``stori-jax`` command line: ``run`` a preset with a random policy, ``suite`` over every
+preset, ``show`` / ``record`` pictures of a preset, ``list`` what exists."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 import time
+from pathlib import Path
 
 
 def _cmd_list(args) -> int:
@@ -75,6 +77,71 @@ def _cmd_run(args) -> int:
     return 0
 
 
+def _selected_presets(games, presets):
+    from stori_jax import list_presets
+    from stori_jax.presets import preset as check_preset
+
+    chosen = [(g, n) for g, n in list_presets()
+              if (not games or g.lower() in {x.lower() for x in games})
+              and (not presets or n in presets)]
+    for g in games or []:
+        check_preset(g, "3.1")  # unknown game -> ValueError naming the allowed ones
+    if not chosen:
+        raise ValueError(f"no paper preset matches --games {games} --presets {presets}")
+    return chosen
+
+
+def _cmd_suite(args) -> int:
+    from stori_jax.suite import run_suite
+
+    for name, value in (("--episodes", args.episodes), ("--num-envs", args.num_envs),
+                        ("--max-steps", args.max_steps)):
+        if value < 1:
+            raise ValueError(f"{name} must be >= 1, got {value}")
+    out = run_suite(_selected_presets(args.games, args.presets), episodes=args.episodes,
+                    num_envs=args.num_envs, max_steps=args.max_steps, seed=args.seed,
+                    out=args.out, gallery=not args.no_gallery, progress=not args.quiet)
+    print((out / "table.md").read_text())
+    print(f"wrote {out}/table.md, {out}/results.json" + ("" if args.no_gallery
+                                                         else f" and {out}/gallery/"))
+    return 0
+
+
+def _config_for(args):
+    import json
+
+    import stori_jax
+
+    if (args.preset is None) == (args.config is None):
+        raise ValueError("give a PRESET or --config FILE (a reference-format JSON), not both")
+    if args.preset is not None:
+        return args.preset, stori_jax.preset(args.game, args.preset)
+    with open(args.config) as f:
+        return Path(args.config).stem, stori_jax.Config.from_reference(json.load(f),
+                                                                         game=args.game)
+
+
+def _cmd_show(args) -> int:
+    from stori_jax.visual import contact_sheet
+
+    name, config = _config_for(args)
+    out = args.out or Path(f"{args.game}-{name}.png")
+    print(f"wrote {contact_sheet(args.game, name, config, out, steps=args.steps, seed=args.seed)}")
+    return 0
+
+
+def _cmd_record(args) -> int:
+    from stori_jax.visual import record_episode
+
+    name, config = _config_for(args)
+    if args.episodes != 1:
+        raise ValueError(f"--episodes: recording supports 1 episode per file, got {args.episodes}")
+    out = args.out or Path(f"{args.game}-{name}.gif")
+    path = record_episode(args.game, name, config, out, max_steps=args.max_steps, seed=args.seed)
+    print(f"wrote {path}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="stori-jax", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -89,6 +156,33 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--obs", default=None, choices=["raw", "atari84", "dreamer64", "ram"])
     run.add_argument("--granularity", default=None, choices=["frame", "step"])
     run.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    suite = sub.add_parser("suite", help="every paper preset with a random agent: table, JSON, "
+                                         "gallery")
+    suite.add_argument("--games", nargs="+", default=None, help="a subset of the games")
+    suite.add_argument("--presets", nargs="+", default=None, help="a subset of preset names")
+    suite.add_argument("--episodes", type=int, default=8, help="episodes per preset")
+    suite.add_argument("--num-envs", type=int, default=8)
+    suite.add_argument("--max-steps", type=int, default=2500,
+                       help="agent steps per preset at most (if episodes are long)")
+    suite.add_argument("--seed", type=int, default=0)
+    suite.add_argument("--out", type=Path, default=None, help="default results/suite-<date>")
+    suite.add_argument("--no-gallery", action="store_true")
+    suite.add_argument("--quiet", action="store_true")
+
+    for command, helptext in (("show", "PNG contact sheet: the preset beside its 3.1 twin"),
+                              ("record", "animated GIF of an episode with per-step overlay")):
+        p = sub.add_parser(command, help=helptext)
+        p.add_argument("game")
+        p.add_argument("preset", nargs="?", default=None)
+        p.add_argument("--config", default=None, help="a reference-format JSON file instead")
+        p.add_argument("--seed", type=int, default=0)
+        p.add_argument("--out", type=Path, default=None)
+        if command == "show":
+            p.add_argument("--steps", type=int, default=200, help="how far to play")
+        else:
+            p.add_argument("--episodes", type=int, default=1)
+            p.add_argument("--max-steps", type=int, default=1000)
     return parser
 
 
@@ -98,6 +192,12 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "list":
             return _cmd_list(args)
+        if args.command == "suite":
+            return _cmd_suite(args)
+        if args.command == "show":
+            return _cmd_show(args)
+        if args.command == "record":
+            return _cmd_record(args)
         if args.steps < 1:
             raise ValueError(f"--steps must be >= 1, got {args.steps}")
         return _cmd_run(args)

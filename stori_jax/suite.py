@@ -1,0 +1,83 @@
+"""``stori-jax suite``: every paper preset (or a subset) for N episodes with a random agent,
+a results table (markdown + JSON) and a gallery of contact sheets."""
+
+from __future__ import annotations
+
+import datetime
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def run_preset(game: str, name: str, *, episodes: int, num_envs: int, max_steps: int,
+               seed: int) -> dict:
+    """Random play until ``episodes`` episodes ended (or ``max_steps`` agent steps)."""
+    import jax
+
+    import stori_jax
+
+    env = stori_jax.make(game, name, num_envs=num_envs, seed=seed, obs="atari84")
+    key = jax.random.PRNGKey(seed)
+    returns, events, corrupted, masked, slots, steps = [], 0, 0, 0, 0, 0
+    with env:
+        env.reset()
+        start = time.perf_counter()
+        while len(returns) < episodes and steps < max_steps:
+            key, k = jax.random.split(key)
+            actions = jax.random.randint(k, (num_envs,), 0, env.num_actions)
+            _, _, terminated, truncated, info = env.step(actions)
+            done = np.asarray(terminated | truncated)
+            returns.extend(np.asarray(info["episode_return"])[done].tolist())
+            events += int(np.asarray(info["event_fired"]).sum())
+            flags = np.asarray(info["action_corrupted"])
+            corrupted += int(flags.sum())
+            slots += flags.size
+            masked += int(np.asarray(info["obs_masked"]).sum())
+            steps += 1
+        elapsed = time.perf_counter() - start
+    return dict(game=game, preset=name, definition=stori_jax.describe_preset(game, name),
+                episodes=len(returns), mean_return=float(np.mean(returns)) if returns else None,
+                events_fired=events, corrupted_actions=corrupted,
+                corrupted_fraction=corrupted / max(slots, 1),
+                masked_fraction=masked / max(steps * num_envs, 1), agent_steps=steps,
+                env_steps_per_s=steps * num_envs / elapsed)
+
+
+def table(rows: list[dict]) -> str:
+    lines = ["| game | preset | definition | mean return | episodes | events fired | "
+             "corrupted actions | masked obs | env steps/s |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        mean = "-" if r["mean_return"] is None else f"{r['mean_return']:.1f}"
+        lines.append(f"| {r['game']} | {r['preset']} | {r['definition']} | {mean} | "
+                     f"{r['episodes']} | {r['events_fired']} | {r['corrupted_actions']} | "
+                     f"{r['masked_fraction']:.0%} | {r['env_steps_per_s']:.0f} |")
+    return "\n".join(lines) + "\n"
+
+
+def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: int,
+              out: Path | None, gallery: bool, progress: bool = True) -> Path:
+    from tqdm import tqdm
+
+    import stori_jax
+    from stori_jax.visual import contact_sheet
+
+    out = Path(out) if out else Path("results") / f"suite-{datetime.date.today().isoformat()}"
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for game, name in tqdm(presets, desc="suite", unit="preset", disable=not progress):
+        rows.append(run_preset(game, name, episodes=episodes, num_envs=num_envs,
+                               max_steps=max_steps, seed=seed))
+        if gallery:
+            contact_sheet(game, name, stori_jax.preset(game, name),
+                          out / "gallery" / f"{game}-{name}.png", seed=seed)
+    (out / "results.json").write_text(json.dumps(dict(
+        seed=seed, episodes=episodes, num_envs=num_envs, max_steps=max_steps, rows=rows),
+        indent=1))
+    text = table(rows)
+    if gallery:
+        text += "\nGallery (3.1 twin beside each preset): " + ", ".join(
+            f"[{g} {n}](gallery/{g}-{n}.png)" for g, n in presets) + "\n"
+    (out / "table.md").write_text(text)
+    return out

@@ -1,0 +1,58 @@
+"""The user-facing commands: suite (table, JSON, gallery), show (contact sheet), record (GIF)."""
+
+import json
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from stori_jax.cli import main
+
+
+def test_suite_writes_table_json_and_gallery(tmp_path, capsys):
+    out = tmp_path / "suite"
+    assert main(["suite", "--games", "Breakout", "--presets", "1", "3.2A", "--episodes", "1",
+                 "--num-envs", "2", "--max-steps", "60", "--out", str(out), "--quiet"]) == 0
+    rows = json.loads((out / "results.json").read_text())["rows"]
+    assert [(r["game"], r["preset"]) for r in rows] == [("Breakout", "1"), ("Breakout", "3.2A")]
+    noisy, masked = rows
+    assert 0.2 < noisy["corrupted_fraction"] < 0.4  # p = 0.3 per frame
+    assert noisy["masked_fraction"] == 0 and masked["masked_fraction"] == 1.0  # blackout p = 1
+    assert masked["corrupted_actions"] == 0
+    table = (out / "table.md").read_text()
+    assert "| Breakout | 3.2A | blackout mode 10, p = 1.0 |" in table
+    for name in ("1", "3.2A"):
+        with Image.open(out / "gallery" / f"Breakout-{name}.png") as img:
+            assert img.width > 300 and img.height > 400
+
+
+def test_show_puts_the_mask_on_the_preset_side_only(tmp_path):
+    path = tmp_path / "sheet.png"
+    assert main(["show", "Breakout", "3.2A", "--steps", "20", "--out", str(path)]) == 0
+    sheet = np.asarray(Image.open(path).convert("RGB"))
+    # layout: title 24 px, then rows of (16 px caption + 210 px screen + 6 px pad), columns of
+    # 160 px + 6 px pad; blackout mode 10 hides ball bands y 105..130 and 157..182, x 8..151
+    x0, top = 6, 24 + 16
+    twin = sheet[top:top + 210, x0:x0 + 160]
+    preset = sheet[top + 210 + 6 + 16:top + 2 * 210 + 6 + 16, x0:x0 + 160]
+    band = (slice(105, 131), slice(8, 152))
+    assert (preset[band] == 0).all()
+    np.testing.assert_array_equal(preset[:100], twin[:100])  # above the bands: untouched
+
+
+def test_record_writes_an_animated_gif(tmp_path):
+    path = tmp_path / "episode.gif"
+    assert main(["record", "Boxing", "1", "--max-steps", "12", "--out", str(path)]) == 0
+    with Image.open(path) as gif:
+        assert gif.n_frames == 13  # the first observation and 12 steps
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["suite", "--games", "Pong"], "unknown game 'Pong' for presets"),
+    (["suite", "--episodes", "0"], "--episodes must be >= 1"),
+    (["show", "Breakout"], "give a PRESET or --config FILE"),
+    (["record", "Breakout", "1", "--episodes", "2"], "recording supports 1 episode"),
+])
+def test_bad_arguments(argv, message, capsys):
+    assert main(argv) == 2
+    assert message in capsys.readouterr().err
