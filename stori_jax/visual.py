@@ -92,12 +92,12 @@ def contact_sheet(game: str, name: str, config: Config, path: Path, *, steps: in
     Image, ImageDraw = _pil()
     frames = twin_run(game, config, steps, seed)
     columns = [frames[i] for i in _moments(frames, moments)]
-    w, h, pad, top, title = 160, 210, 6, 16, 24
+    w, h, pad, top, title = 160, 210, 6, 16, 36
     sheet = Image.new("RGB", (len(columns) * (w + pad) + pad, title + 2 * (h + top + pad)),
                       (24, 24, 24))
     draw = ImageDraw.Draw(sheet)
-    draw.text((pad, 6), f"{game} {name}: {config.describe()}   (top: 3.1 twin, bottom: {name})",
-              fill=(230, 230, 230))
+    draw.text((pad, 4), f"{game} {name}   (top: 3.1 twin, bottom: {name})", fill=(230, 230, 230))
+    draw.text((pad, 18), config.describe(), fill=(180, 180, 180))
     for c, f in enumerate(columns):
         x = pad + c * (w + pad)
         for r, key in enumerate(("twin", "preset")):

@@ -30,9 +30,9 @@ def test_show_puts_the_mask_on_the_preset_side_only(tmp_path):
     path = tmp_path / "sheet.png"
     assert main(["show", "Breakout", "3.2A", "--steps", "20", "--out", str(path)]) == 0
     sheet = np.asarray(Image.open(path).convert("RGB"))
-    # layout: title 24 px, then rows of (16 px caption + 210 px screen + 6 px pad), columns of
+    # layout: title 36 px, then rows of (16 px caption + 210 px screen + 6 px pad), columns of
     # 160 px + 6 px pad; blackout mode 10 hides ball bands y 105..130 and 157..182, x 8..151
-    x0, top = 6, 24 + 16
+    x0, top = 6, 36 + 16
     twin = sheet[top:top + 210, x0:x0 + 160]
     preset = sheet[top + 210 + 6 + 16:top + 2 * 210 + 6 + 16, x0:x0 + 160]
     band = (slice(105, 131), slice(8, 152))

@@ -1,0 +1,71 @@
+"""Regenerate every picture of the docs with the project's own drawing code (`stori-jax show`).
+
+    .venv/bin/python docs/make_pictures.py            # presets and every mode (about 8 minutes)
+    .venv/bin/python docs/make_pictures.py --presets  # the 24 preset pictures only
+
+Writes docs/img/<Game>-<preset>.png and docs/img/modes/<Game>-<kind>-<mode>.png, and
+docs/modes.md, the page that lists every mode of every game with its picture.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from tqdm import tqdm
+
+import stori_jax
+from stori_jax import Config, ObservationMask, RandomEvent
+from stori_jax.functional.masks import CROP_REGIONS, TORCH_MODE
+from stori_jax.visual import contact_sheet
+
+DOCS = Path(__file__).resolve().parent
+EVENT_PROB = 0.5  # high enough that an event shows within a short run
+
+
+def mode_configs():
+    """(game, kind, mode, description, config) for every mode of every game."""
+    for game in stori_jax.STORI_GAMES:
+        spec = stori_jax.get_game(game)
+        for mode in list(CROP_REGIONS) + [TORCH_MODE]:
+            yield game, "crop", mode, ("torch" if mode == TORCH_MODE else
+                                       "left right top bottom".split()[mode - 1] + " half"), \
+                Config(observation=ObservationMask("crop", mode, 1.0))
+        for mode, entry in spec.blackout_modes.items():
+            yield game, "blackout", mode, entry.name, \
+                Config(observation=ObservationMask("blackout", mode, 1.0))
+        for mode, entry in spec.ram_obs_modes.items():
+            yield game, "ram", mode, entry.name, Config(observation=ObservationMask("ram", mode, 1.0))
+        for mode, entry in spec.event_modes.items():
+            yield game, "event", mode, entry.name, Config(event=RandomEvent(mode, EVENT_PROB))
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--presets", action="store_true", help="only the preset pictures")
+    args = parser.parse_args(argv)
+    img = DOCS / "img"
+    for game, name in tqdm(stori_jax.list_presets(), desc="presets"):
+        contact_sheet(game, name, stori_jax.preset(game, name), img / f"{game}-{name}.png",
+                      steps=700)
+    if args.presets:
+        return
+    lines = ["# Every mode of every game", "",
+             "Made by `docs/make_pictures.py` with `stori_jax.visual.contact_sheet` (what "
+             "`stori-jax show` draws): top row the default game, bottom row the mode, same seed "
+             f"and actions. Masks at p = 1; events at p = {EVENT_PROB} (most events change the "
+             "RAM, not the picture: the caption counts the firings).", ""]
+    current = None
+    for game, kind, mode, description, config in tqdm(list(mode_configs()), desc="modes"):
+        if game != current:
+            lines += ["", f"## {game}", "", "| kind | mode | what it does | picture |",
+                      "|---|---|---|---|"]
+            current = game
+        path = img / "modes" / f"{game}-{kind}-{mode}.png"
+        contact_sheet(game, f"{kind} {mode}", config, path, steps=150, moments=2)
+        lines.append(f"| {kind} | {mode} | {description} | ![]({path.relative_to(DOCS)}) |")
+    (DOCS / "modes.md").write_text("\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()
