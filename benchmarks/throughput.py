@@ -160,7 +160,9 @@ def naive(game, preset, batch, seconds):
     return rate
 
 
-def stori(game, preset, batch, workers, seconds, obs, backend):
+def stori(game, preset, batch, seconds, obs, backend):
+    """stori-jax with its default worker split (one worker per core but one, plus the
+    calling process)."""
     import stori_jax
 
     kwargs = {}
@@ -210,8 +212,8 @@ def plan_measurements(args):
         for obs in ("raw", "atari84"):
             jobs.append(dict(kind="stori-jax", game="Breakout", preset="3.1", B=b,
                              backend="subproc", obs=obs,
-                             fn=lambda b=b, obs=obs: stori("Breakout", "3.1", b, w, args.seconds,
-                                                           obs, "subproc")))
+                             fn=lambda b=b, obs=obs: stori("Breakout", "3.1", b, args.seconds, obs,
+                                                           "subproc")))
     for g, p in presets:
         if not args.skip_naive:
             jobs.append(dict(kind="naive gymnasium", game=g, preset=p, B=args.batch,
@@ -227,7 +229,7 @@ def plan_measurements(args):
                 jobs.append(dict(kind="stori-jax", game=g, preset=p, B=args.batch,
                                  backend=backend, obs=obs,
                                  fn=lambda g=g, p=p, obs=obs, backend=backend: stori(
-                                     g, p, args.batch, w, args.seconds, obs, backend)))
+                                     g, p, args.batch, args.seconds, obs, backend)))
     return jobs
 
 

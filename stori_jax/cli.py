@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 
 
@@ -32,48 +31,27 @@ def _cmd_list(args) -> int:
 
 
 def _cmd_run(args) -> int:
-    import jax
-    import numpy as np
-    from tqdm import tqdm
-
     import stori_jax
+    from stori_jax.suite import play_random
 
     env = stori_jax.make(args.game, args.preset, num_envs=args.num_envs, seed=args.seed,
                          num_workers=args.num_workers, obs=args.obs,
                          granularity=args.granularity)
     print(f"{env}")
-    key = jax.random.PRNGKey(args.seed)
-    episodes, returns = 0, []
-    events = corrupted = switches = masked = 0
     with env:
-        obs, info = env.reset()
-        previous_concept = np.zeros(env.num_envs, np.int32)
-        start = time.perf_counter()
-        for _ in tqdm(range(args.steps), desc=f"{args.game} {args.preset or '3.1'}",
-                      unit="step", disable=args.quiet):
-            key, k = jax.random.split(key)
-            actions = jax.random.randint(k, (env.num_envs,), 0, env.num_actions)
-            obs, reward, terminated, truncated, info = env.step(actions)
-            done = np.asarray(terminated | truncated)
-            episodes += int(done.sum())
-            returns.extend(np.asarray(info["episode_return"])[done].tolist())
-            events += int(np.asarray(info["event_fired"]).sum())
-            corrupted += int(np.asarray(info["action_corrupted"]).sum())
-            masked += int(np.asarray(info["obs_masked"]).sum())
-            concept = np.asarray(info["concept"])
-            switches += int((concept != previous_concept).sum())
-            previous_concept = np.where(done, 0, concept)
-        elapsed = time.perf_counter() - start
+        env.reset()
+        stats = play_random(env, args.seed, max_steps=args.steps,
+                            progress=None if args.quiet else f"{args.game} {args.preset or '3.1'}")
     env_steps = args.steps * env.num_envs
-    mean_return = f"{np.mean(returns):.2f}" if returns else "n/a (no episode finished)"
-    print(f"episodes finished : {episodes}")
-    print(f"mean return       : {mean_return}")
-    print(f"events fired      : {events}")
-    print(f"corrupted actions : {corrupted}")
-    print(f"concept switches  : {switches}")
-    print(f"masked obs        : {masked} of {env_steps}")
-    print(f"env steps / s     : {env_steps / elapsed:.0f} ({env_steps} steps in {elapsed:.1f} s, "
-          "including compilation)")
+    mean = stats["mean_return"]
+    print(f"episodes finished : {stats['episodes']}")
+    print(f"mean return       : {'n/a (no episode finished)' if mean is None else f'{mean:.2f}'}")
+    print(f"events fired      : {stats['events_fired']}")
+    print(f"corrupted actions : {stats['corrupted_actions']}")
+    print(f"concept switches  : {stats['concept_switches']}")
+    print(f"masked obs        : {stats['masked_obs']} of {env_steps}")
+    print(f"env steps / s     : {stats['env_steps_per_s']:.0f} ({env_steps} steps in "
+          f"{stats['elapsed_s']:.1f} s, including compilation)")
     return 0
 
 

@@ -178,6 +178,10 @@ class Env:
                                                        np.uint8)
         self._jit_plan = jit_key(plan)
         self._zero_draws = None
+        # nothing random happens before the emulators run: skip the JAX call of send()
+        self._deterministic_before_step = (
+            plan.noise is None and plan.event is None and plan.mask is None
+            and plan.drift_schedule is None and plan.noop_max == 0)
         self._state = initial_state(plan, seed)
         self._in_flight = None
         self._needs_reset = True
@@ -286,13 +290,6 @@ class Env:
         return self.recv()
 
     # -- internals ------------------------------------------------------------------------------
-
-    @property
-    def _deterministic_before_step(self) -> bool:
-        """Nothing random happens before the emulators run: skip the JAX call."""
-        p = self.plan
-        return (p.noise is None and p.event is None and p.mask is None
-                and p.drift_schedule is None and p.noop_max == 0)
 
     def _host_draws(self, actions: np.ndarray) -> Draws:
         """The Draws of a step without randomness, built on the host (numpy)."""

@@ -11,38 +11,54 @@ from pathlib import Path
 import numpy as np
 
 
+def play_random(env, seed: int, *, max_steps: int, episodes: int | None = None,
+                progress: str | None = None) -> dict:
+    """Step ``env`` (already reset) with uniform random actions from ``seed``'s key for
+    ``max_steps`` agent steps, or until ``episodes`` episodes ended; count what happened."""
+    import jax
+    from tqdm import tqdm
+
+    key = jax.random.PRNGKey(seed)
+    returns, events, corrupted, slots, masked, switches, steps = [], 0, 0, 0, 0, 0, 0
+    previous_concept = np.zeros(env.num_envs, np.int32)
+    bar = tqdm(total=max_steps, desc=progress, unit="step", disable=progress is None)
+    start = time.perf_counter()
+    while steps < max_steps and (episodes is None or len(returns) < episodes):
+        key, k = jax.random.split(key)
+        actions = jax.random.randint(k, (env.num_envs,), 0, env.num_actions)
+        _, _, terminated, truncated, info = env.step(actions)
+        done = np.asarray(terminated | truncated)
+        returns.extend(np.asarray(info["episode_return"])[done].tolist())
+        events += int(np.asarray(info["event_fired"]).sum())
+        flags = np.asarray(info["action_corrupted"])
+        corrupted += int(flags.sum())
+        slots += flags.size
+        masked += int(np.asarray(info["obs_masked"]).sum())
+        concept = np.asarray(info["concept"])
+        switches += int((concept != previous_concept).sum())
+        previous_concept = np.where(done, 0, concept)
+        steps += 1
+        bar.update()
+    bar.close()
+    elapsed = time.perf_counter() - start
+    return dict(episodes=len(returns), mean_return=float(np.mean(returns)) if returns else None,
+                events_fired=events, corrupted_actions=corrupted,
+                corrupted_fraction=corrupted / max(slots, 1), masked_obs=masked,
+                masked_fraction=masked / max(steps * env.num_envs, 1), concept_switches=switches,
+                agent_steps=steps, env_steps_per_s=steps * env.num_envs / elapsed,
+                elapsed_s=elapsed)
+
+
 def run_preset(game: str, name: str, *, episodes: int, num_envs: int, max_steps: int,
                seed: int) -> dict:
     """Random play until ``episodes`` episodes ended (or ``max_steps`` agent steps)."""
-    import jax
-
     import stori_jax
 
-    env = stori_jax.make(game, name, num_envs=num_envs, seed=seed, obs="atari84")
-    key = jax.random.PRNGKey(seed)
-    returns, events, corrupted, masked, slots, steps = [], 0, 0, 0, 0, 0
-    with env:
+    with stori_jax.make(game, name, num_envs=num_envs, seed=seed, obs="atari84") as env:
         env.reset()
-        start = time.perf_counter()
-        while len(returns) < episodes and steps < max_steps:
-            key, k = jax.random.split(key)
-            actions = jax.random.randint(k, (num_envs,), 0, env.num_actions)
-            _, _, terminated, truncated, info = env.step(actions)
-            done = np.asarray(terminated | truncated)
-            returns.extend(np.asarray(info["episode_return"])[done].tolist())
-            events += int(np.asarray(info["event_fired"]).sum())
-            flags = np.asarray(info["action_corrupted"])
-            corrupted += int(flags.sum())
-            slots += flags.size
-            masked += int(np.asarray(info["obs_masked"]).sum())
-            steps += 1
-        elapsed = time.perf_counter() - start
+        stats = play_random(env, seed, max_steps=max_steps, episodes=episodes)
     return dict(game=game, preset=name, definition=stori_jax.describe_preset(game, name),
-                episodes=len(returns), mean_return=float(np.mean(returns)) if returns else None,
-                events_fired=events, corrupted_actions=corrupted,
-                corrupted_fraction=corrupted / max(slots, 1),
-                masked_fraction=masked / max(steps * num_envs, 1), agent_steps=steps,
-                env_steps_per_s=steps * num_envs / elapsed)
+                **stats)
 
 
 def table(rows: list[dict]) -> str:
