@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import numbers
 
@@ -217,10 +218,10 @@ class Env:
         """Reset every env. Returns (obs, info)."""
         self._check_open()
         if self._in_flight is not None or getattr(self.backend, "pending", False):
-            try:
-                self.backend.recv()  # finish a step (or an interrupted reset) still in flight
-            except InterruptedStepError:
-                pass  # the reset below starts every emulator afresh
+            # finish a step (or an interrupted reset) still in flight; a step interrupted inside
+            # emulation needs nothing more: the reset below starts every emulator afresh
+            with contextlib.suppress(InterruptedStepError):
+                self.backend.recv()
             self._in_flight = None
         zeros = jnp.zeros((self.num_envs,), jnp.int32)
         state = self._state._replace(episode_step=zeros, prev_executed=zeros)
