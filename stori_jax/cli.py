@@ -1,5 +1,6 @@
 """The ``stori-jax`` command line: ``run`` a preset with a random policy, ``suite`` over every
-preset, ``show`` / ``record`` pictures of a preset, ``list`` what exists."""
+preset, ``show`` / ``record`` pictures of a preset, ``list`` what exists; ``train`` a PPO
+baseline, ``eval`` it (or the random policy) by the paper's protocol, ``table`` the results."""
 
 from __future__ import annotations
 
@@ -120,6 +121,9 @@ def _cmd_record(args) -> int:
     return 0
 
 
+BASELINE_COMMANDS = ("train", "eval", "table")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="stori-jax", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -161,6 +165,9 @@ def build_parser() -> argparse.ArgumentParser:
         else:
             p.add_argument("--episodes", type=int, default=1)
             p.add_argument("--max-steps", type=int, default=1000)
+    from baselines.commands import add_parsers
+
+    add_parsers(sub)  # train, eval, table
     return parser
 
 
@@ -176,6 +183,10 @@ def main(argv: list[str] | None = None) -> int:
             return _cmd_show(args)
         if args.command == "record":
             return _cmd_record(args)
+        if args.command in BASELINE_COMMANDS:
+            from baselines.commands import COMMANDS
+
+            return COMMANDS[args.command](args)
         if args.steps < 1:
             raise ValueError(f"--steps must be >= 1, got {args.steps}")
         return _cmd_run(args)

@@ -13,8 +13,8 @@ import numpy as np
 
 from stori_jax.backends.subproc import EnvClosedError, InterruptedStepError, SubprocBackend
 from stori_jax.config import Config, GRANULARITIES
-from stori_jax.core import (Draws, WorkerOutputs, after_step, before_step, initial_state,
-                            push_frames)
+from stori_jax.core import (Draws, EnvState, WorkerOutputs, after_step, before_step,
+                            initial_state, push_frames)
 from stori_jax.games import get_game
 from stori_jax.plan import OBS_KINDS, Plan, compile_plan
 from stori_jax.presets import preset as get_preset
@@ -289,6 +289,45 @@ class Env:
         """One agent step of every env: (obs, reward, terminated, truncated, info)."""
         self.send(actions)
         return self.recv()
+
+    # -- snapshots ------------------------------------------------------------------------------
+
+    def snapshot(self) -> dict:
+        """Everything needed to continue this env bit for bit later: the emulators (ALE state
+        with its RNG, STORI bookkeeping) and the JAX-side state.  Picklable; take it between
+        steps (nothing in flight).  Restore it with :meth:`restore` into an env made with the
+        same arguments (e.g. after a restart, to resume training)."""
+        self._check_open()
+        if self._in_flight is not None or self._needs_reset:
+            raise RuntimeError("snapshot() needs a settled env: reset() it, and recv() any step "
+                               "in flight, first")
+        if not hasattr(self.backend, "snapshot"):
+            raise ValueError(f"backend {type(self.backend).__name__} cannot snapshot its "
+                             "emulators; use backend='subproc'")
+        return dict(plan=self.plan, seed=self.seed, state=jax.device_get(self._state),
+                    reset_pending=self._reset_pending.copy(),
+                    emulators=self.backend.snapshot())
+
+    def restore(self, snapshot: dict) -> None:
+        """Continue from ``snapshot`` (taken by :meth:`snapshot` of an env made alike)."""
+        self._check_open()
+        if not isinstance(snapshot, dict) or set(snapshot) != {
+                "plan", "seed", "state", "reset_pending", "emulators"}:
+            raise ValueError("snapshot must be a dict returned by Env.snapshot()")
+        if snapshot["plan"] != self.plan:
+            raise ValueError(f"snapshot was taken of a different env:\n  snapshot: "
+                             f"{snapshot['plan']}\n  this env: {self.plan}")
+        if not hasattr(self.backend, "restore"):
+            raise ValueError(f"backend {type(self.backend).__name__} cannot restore emulators; "
+                             "use backend='subproc'")
+        if self._in_flight is not None or getattr(self.backend, "pending", False):
+            with contextlib.suppress(InterruptedStepError):
+                self.backend.recv()
+            self._in_flight = None
+        self.backend.restore(snapshot["emulators"])
+        self._state = EnvState(*jax.tree.map(jnp.asarray, tuple(snapshot["state"])))
+        self._reset_pending = np.array(snapshot["reset_pending"], bool)
+        self._needs_reset = False
 
     # -- internals ------------------------------------------------------------------------------
 

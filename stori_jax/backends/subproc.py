@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import multiprocessing as mp
 import os
+import pickle
 import sys
 import weakref
 from multiprocessing.connection import wait
@@ -148,11 +149,14 @@ class SubprocBackend:
         return self._pending
 
     def _send_all(self, command: bytes) -> None:
+        self._send_each([command] * len(self.conns))
+
+    def _send_each(self, commands: list[bytes]) -> None:
         if self.closed:
             raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
         if self._pending:
             raise RuntimeError("a step is already in flight: call recv() before sending again")
-        for w, conn in enumerate(self.conns):
+        for w, (conn, command) in enumerate(zip(self.conns, commands, strict=True)):
             try:
                 conn.send_bytes(command)
             except (OSError, ValueError):
@@ -167,12 +171,12 @@ class SubprocBackend:
         raise WorkerError(f"emulator worker {w} (envs {lo}..{hi - 1}, pid {p.pid}) died {when} "
                           f"with exit code {p.exitcode}; the environment is closed")
 
-    def _wait_all(self, what: str) -> None:
+    def _wait_all(self, what: str) -> dict[int, bytes]:
         # The workers still to reply live on self: if the wait is interrupted (Ctrl-C), the
         # command stays pending and the next recv() resumes it, instead of a later command
         # taking this one's replies (and the workers' half-written buffers) for its own.
         if self._waiting is None:
-            self._waiting = dict(enumerate(self.conns))
+            self._waiting, self._replies = dict(enumerate(self.conns)), {}
         waiting = self._waiting
         sentinels = {p.sentinel: w for w, p in enumerate(self.processes)}
         try:
@@ -194,11 +198,13 @@ class SubprocBackend:
                         self.close()
                         raise WorkerError(f"emulator worker {w} (envs {lo}..{hi - 1}) failed "
                                           f"during {what}:\n{reply[1:].decode(errors='replace')}")
+                    self._replies[w] = reply[1:]
                     del waiting[w]
         except WorkerError:
             self._waiting, self._pending = None, False
             raise
         self._waiting, self._pending = None, False
+        return self._replies
 
     # -- the backend protocol ---------------------------------------------------------------
 
@@ -238,6 +244,25 @@ class SubprocBackend:
         if self.frames_layout == "pooled":
             return dict(self.views, frames=self.views["frames"][0])  # contiguous (B, H, W, 3)
         return self.views
+
+    def snapshot(self) -> list[dict]:
+        """Every emulator's state (picklable), in env order; nothing may be in flight."""
+        self._send_all(b"P")
+        states = [emulator.snapshot() for emulator in self._inline]
+        replies = self._wait_all("a snapshot")
+        for w in range(len(self.conns)):
+            states.extend(pickle.loads(replies[w]))
+        return states
+
+    def restore(self, states: list[dict]) -> None:
+        """Put every emulator back in a state taken by :meth:`snapshot` of a like backend."""
+        if len(states) != len(self._inline) + sum(hi - lo for lo, hi in self.ranges):
+            raise ValueError(f"snapshot holds {len(states)} emulators, this backend has "
+                             f"{len(self._inline) + sum(hi - lo for lo, hi in self.ranges)}")
+        self._send_each([b"L" + pickle.dumps(states[lo:hi]) for lo, hi in self.ranges])
+        for emulator, snap in zip(self._inline, states):
+            emulator.restore(snap)
+        self._wait_all("a restore")
 
     def close(self) -> None:
         self._finalizer()

@@ -4,13 +4,16 @@ Deterministic: everything random arrives in the shared buffers (executed actions
 uniforms, RAM-obs render decisions, reset no-ops).  Imports numpy, ale-py and the game tables
 only (no JAX), so it starts fast.
 
-Protocol over a Pipe, one byte per command: b"S" step, b"R" reset all, b"C" close.
-Replies: b"K" done, or b"E" + a traceback.
+Protocol over a Pipe, one byte per command: b"S" step, b"R" reset all, b"C" close, b"P"
+snapshot (the reply carries the pickled emulator states), b"L" + pickled states: restore.
+Replies: b"K" done (+ a payload for b"P"), or b"E" + a traceback.
 """
 
 from __future__ import annotations
 
+import copy
 import os
+import pickle
 import signal
 import traceback
 from dataclasses import dataclass
@@ -90,6 +93,25 @@ class Emulator:
         ale.getRAM(self.ram)
         v["ram_rendered"][i] = rendered
         v["lives"][i] = ale.lives()
+
+    # -- snapshots --------------------------------------------------------------------------
+
+    def snapshot(self) -> dict:
+        """This emulator's whole state (ALE with its RNG, and the STORI bookkeeping), picklable."""
+        return dict(ale=pickle.dumps(self.ale.cloneState(include_rng=True)),
+                    prev_ram=self.prev_ram.copy(), start_ram=self.start_ram.copy(),
+                    rule_state=copy.deepcopy(self.rule_state), carry=self.carry,
+                    episode_return=self.episode_return, episode_length=self.episode_length)
+
+    def restore(self, snap: dict) -> None:
+        self.ale.restoreState(pickle.loads(snap["ale"]))
+        self.prev_ram[:] = snap["prev_ram"]
+        self.start_ram[:] = snap["start_ram"]
+        self.rule_state = copy.deepcopy(snap["rule_state"])
+        self.carry = snap["carry"]
+        self.episode_return = snap["episode_return"]
+        self.episode_length = snap["episode_length"]
+        self.ale.getRAM(self.ram)
 
     def pool(self) -> None:
         if self.spec.pool_screens:
@@ -226,18 +248,24 @@ def worker_main(spec: WorkerSpec, buffers, conn, parent_pid: int) -> None:
         except (EOFError, OSError):
             return
         try:
+            reply = b"K"
             if command == b"S":
                 for emulator in emulators:
                     emulator.step()
             elif command == b"R":
                 for emulator in emulators:
                     emulator.reset()
+            elif command == b"P":
+                reply += pickle.dumps([emulator.snapshot() for emulator in emulators])
+            elif command[:1] == b"L":
+                for emulator, snap in zip(emulators, pickle.loads(command[1:]), strict=True):
+                    emulator.restore(snap)
             elif command == b"C":
                 conn.send_bytes(b"K")
                 return
             else:
-                raise RuntimeError(f"unknown command {command!r}")
-            conn.send_bytes(b"K")
+                raise RuntimeError(f"unknown command {command[:1]!r}")
+            conn.send_bytes(reply)
         except (BrokenPipeError, EOFError):
             return
         except BaseException:

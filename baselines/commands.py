@@ -1,0 +1,140 @@
+"""``stori-jax train ppo``, ``stori-jax eval`` and ``stori-jax table``: the baselines' command
+line, registered by :mod:`stori_jax.cli`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def add_parsers(sub) -> None:
+    train = sub.add_parser("train", help="train a baseline agent on a preset (PPO)")
+    train.add_argument("agent", choices=["ppo"], help="the algorithm")
+    train.add_argument("--game", required=True)
+    train.add_argument("--preset", default="3.1")
+    train.add_argument("--seed", type=int, default=0)
+    train.add_argument("--steps", type=int, default=100_000, help="agent steps in total")
+    train.add_argument("--out", type=Path, default=None,
+                       help="run directory (default results/train/<game>-<preset>/ppo-seed<S>)")
+    train.add_argument("--resume", action="store_true",
+                       help="continue from the run directory's checkpoint.pkl")
+    train.add_argument("--set", dest="overrides", action="append", default=[],
+                       metavar="FIELD=VALUE", help="any PPO hyperparameter, e.g. network=nips")
+    train.add_argument("--eval-episodes", type=int, default=0,
+                       help="evaluate the final policy for this many episodes (0: not now)")
+    train.add_argument("--quiet", action="store_true")
+
+    ev = sub.add_parser("eval", help="the evaluation protocol: N episodes of a checkpoint's "
+                                     "policy (or the random policy) on its preset")
+    ev.add_argument("--checkpoint", type=Path, default=None, help="a PPO checkpoint.pkl")
+    ev.add_argument("--random", action="store_true", help="the uniformly random policy instead "
+                                                          "(needs --game and --preset)")
+    ev.add_argument("--game", default=None)
+    ev.add_argument("--preset", default=None)
+    ev.add_argument("--seed", type=int, default=None,
+                    help="training seed the result is filed under (default: the checkpoint's; "
+                         "0 for --random)")
+    ev.add_argument("--episodes", type=int, default=100)
+    ev.add_argument("--policy", choices=["sampled", "greedy"], default="sampled",
+                    help="how a checkpoint acts")
+    ev.add_argument("--eval-seed", type=int, default=None,
+                    help="environment seed of the evaluation (default: training seed + 10000)")
+    ev.add_argument("--num-envs", type=int, default=16)
+    ev.add_argument("--out", type=Path, default=None,
+                    help="directory for eval-<policy>.json (default: the checkpoint's, or "
+                         "results/train/<game>-<preset>/random-seed<S>)")
+    ev.add_argument("--quiet", action="store_true")
+
+    table = sub.add_parser("table", help="aggregate evaluations into the paper's table and plot "
+                                         "learning curves")
+    table.add_argument("results_dir", type=Path)
+    table.add_argument("--out", type=Path, default=None, help="default: RESULTS_DIR")
+    table.add_argument("--policy", choices=["sampled", "greedy"], default="sampled",
+                       help="which PPO evaluation the table shows")
+
+
+def _parse_overrides(items: list[str]) -> dict[str, str]:
+    overrides = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name:
+            raise ValueError(f"--set takes FIELD=VALUE, got {item!r}")
+        overrides[name.strip()] = value.strip()
+    return overrides
+
+
+def default_run_dir(game: str, preset: str, agent: str, seed: int) -> Path:
+    return Path("results") / "train" / f"{game}-{preset}" / f"{agent}-seed{seed}"
+
+
+def cmd_train(args) -> int:
+    from baselines.evaluate import evaluate, write_result
+    from baselines.ppo import PPOConfig, train
+
+    if args.eval_episodes < 0:
+        raise ValueError(f"--eval-episodes must be >= 0, got {args.eval_episodes}")
+    overrides = _parse_overrides(args.overrides)
+    for flag, field in (("--game", "game"), ("--preset", "preset"), ("--seed", "seed"),
+                        ("--steps", "total_steps")):
+        if field in overrides:
+            raise ValueError(f"set {field} with {flag}, not --set")
+    config = PPOConfig.from_overrides(
+        PPOConfig(game=args.game, preset=args.preset, seed=args.seed, total_steps=args.steps),
+        overrides)
+    out = args.out or default_run_dir(config.game, config.preset, "ppo", config.seed)
+    if not args.resume and (out / "checkpoint.pkl").exists():
+        raise ValueError(f"{out} already holds a run: pass --resume to continue it, or another "
+                         "--out")
+    summary = train(config, out, resume=args.resume, progress=not args.quiet)
+    print(f"trained {summary['agent_steps']} agent steps in {summary['train_seconds']:.0f} s "
+          f"({summary['train_sps']:.0f} steps/s); wrote {out}/log.csv, episodes.csv, "
+          "checkpoint.pkl, summary.json")
+    if args.eval_episodes:
+        result = evaluate(config.game, config.preset, policy="sampled", seed=config.seed,
+                          episodes=args.eval_episodes, checkpoint=out / "checkpoint.pkl",
+                          progress=not args.quiet)
+        print(f"eval: mean return {result['mean_return']:.2f} over {args.eval_episodes} "
+              f"episodes; wrote {write_result(result, out)}")
+    return 0
+
+
+def cmd_eval(args) -> int:
+    from baselines.evaluate import evaluate, write_result
+    from baselines.ppo import load_checkpoint
+
+    if args.random == (args.checkpoint is not None):
+        raise ValueError("give either --checkpoint PATH or --random (with --game and --preset)")
+    if args.random:
+        if args.game is None or args.preset is None:
+            raise ValueError("--random needs --game and --preset")
+        game, preset, seed, policy = args.game, args.preset, args.seed or 0, "random"
+        out = args.out or default_run_dir(game, preset, "random", seed)
+        checkpoint = None
+    else:
+        config = load_checkpoint(args.checkpoint)["config"]
+        for flag, value, trained in (("--game", args.game, config["game"]),
+                                     ("--preset", args.preset, config["preset"])):
+            if value is not None and value != trained:
+                raise ValueError(f"{flag} {value} differs from the checkpoint's {trained}")
+        game, preset, policy = config["game"], config["preset"], args.policy
+        seed = config["seed"] if args.seed is None else args.seed
+        out, checkpoint = args.out or args.checkpoint.parent, args.checkpoint
+    result = evaluate(game, preset, policy=policy, episodes=args.episodes, seed=seed,
+                      eval_seed=args.eval_seed, num_envs=args.num_envs, checkpoint=checkpoint,
+                      progress=not args.quiet)
+    print(f"{game} {preset} {policy}: mean return {result['mean_return']:.2f} ± "
+          f"{result['std_return']:.2f} (std over {args.episodes} episodes, eval seed "
+          f"{result['eval_seed']}); wrote {write_result(result, out)}")
+    return 0
+
+
+def cmd_table(args) -> int:
+    from baselines.table import build_table
+
+    text, paths = build_table(args.results_dir, args.out, ppo_policy=args.policy)
+    print(text)
+    print("wrote " + ", ".join(str(p) for p in paths))
+    return 0
+
+
+COMMANDS = {"train": cmd_train, "eval": cmd_eval, "table": cmd_table}
+

@@ -1,0 +1,107 @@
+"""The paper's evaluation protocol: a fixed number of whole episodes (100 by default) of a
+policy on its preset, from evaluation seeds apart from the training seeds.
+
+Policies: a PPO checkpoint, acting ``sampled`` (from its distribution) or ``greedy`` (argmax),
+or the uniformly ``random`` policy, the baseline every table shows beside the agents.
+
+Episodes are shared out over the envs in fixed quotas (env i plays its first quota[i] episodes),
+so the sample does not favour short episodes, and a seed gives the same returns every time.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+POLICIES = ("sampled", "greedy", "random")
+EVAL_SEED_OFFSET = 10_000  # evaluation seed = training seed + this, unless given
+
+
+def episode_quotas(episodes: int, num_envs: int) -> np.ndarray:
+    """How many episodes each env plays: ``episodes`` split as evenly as possible."""
+    return np.array([episodes // num_envs + (i < episodes % num_envs) for i in range(num_envs)])
+
+
+def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: int = 0,
+             eval_seed: int | None = None, num_envs: int = 16, checkpoint: Path | None = None,
+             max_episode_frames: int = 108_000, progress: bool = True) -> dict:
+    """Play ``episodes`` episodes; returns a dict with every return and their mean and std."""
+    import stori_jax
+    from tqdm import tqdm
+
+    if policy not in POLICIES:
+        raise ValueError(f"policy must be one of {list(POLICIES)}, got {policy!r}")
+    if (policy == "random") != (checkpoint is None):
+        raise ValueError("give a checkpoint for the 'sampled' and 'greedy' policies, and none "
+                         "for 'random'")
+    for name, value in (("episodes", episodes), ("num_envs", num_envs)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ValueError(f"{name} must be an int >= 1, got {value!r}")
+    eval_seed = seed + EVAL_SEED_OFFSET if eval_seed is None else eval_seed
+    num_envs = min(num_envs, episodes)
+    if checkpoint is not None:
+        from baselines.ppo import load_policy
+
+        config, network, params = load_policy(checkpoint)
+        if (config.game, config.preset) != (game, preset):
+            raise ValueError(f"checkpoint {checkpoint} was trained on {config.game} "
+                             f"{config.preset}, not {game} {preset}")
+
+        @jax.jit
+        def choose(obs, key):
+            logits, _ = network.apply(params, obs)
+            if policy == "greedy":
+                return jnp.argmax(logits, axis=-1).astype(jnp.int32)
+            return jax.random.categorical(key, logits).astype(jnp.int32)
+    else:
+        num_actions = stori_jax.get_game(game).num_actions
+
+        @jax.jit
+        def choose(obs, key):
+            return jax.random.randint(key, (obs.shape[0],), 0, num_actions, jnp.int32)
+
+    quotas = episode_quotas(episodes, num_envs)
+    returns = [[] for _ in range(num_envs)]
+    lengths = [[] for _ in range(num_envs)]
+    key = jax.random.PRNGKey(eval_seed)
+    start, agent_steps = time.perf_counter(), 0
+    with stori_jax.make(game, preset, num_envs=num_envs, seed=eval_seed, obs="atari84",
+                        max_episode_frames=max_episode_frames) as env:
+        obs, _ = env.reset()
+        bar = tqdm(total=episodes, unit="episode", disable=not progress,
+                   desc=f"eval {policy} {game} {preset}")
+        while any(len(r) < q for r, q in zip(returns, quotas)):
+            key, k = jax.random.split(key)
+            obs, _, terminated, truncated, info = env.step(choose(obs, k))
+            agent_steps += num_envs
+            done = np.flatnonzero(np.asarray(terminated | truncated))
+            if done.size:
+                ret, length = np.asarray(info["episode_return"]), np.asarray(info["episode_length"])
+                for i in done:
+                    if len(returns[i]) < quotas[i]:
+                        returns[i].append(float(ret[i]))
+                        lengths[i].append(int(length[i]))
+                        bar.update()
+        bar.close()
+    flat = [r for env_returns in returns for r in env_returns]
+    return dict(game=game, preset=preset, agent="random" if policy == "random" else "ppo",
+                policy=policy, train_seed=seed, eval_seed=eval_seed, episodes=episodes,
+                num_envs=num_envs, max_episode_frames=max_episode_frames,
+                checkpoint=None if checkpoint is None else str(checkpoint),
+                mean_return=float(np.mean(flat)), std_return=float(np.std(flat)),
+                returns=flat, lengths=[n for env_lengths in lengths for n in env_lengths],
+                agent_steps=agent_steps, seconds=time.perf_counter() - start)
+
+
+def write_result(result: dict, out_dir: Path) -> Path:
+    """``out_dir``/eval-<policy>.json, the file ``stori-jax table`` collects."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / f"eval-{result['policy']}.json"
+    path.write_text(json.dumps(result, indent=1))
+    return path

@@ -1,0 +1,217 @@
+"""``stori-jax table RESULTS_DIR``: every evaluation under RESULTS_DIR aggregated into the
+paper's layout (game x preset, mean ± std over seeds) beside the paper's DreamerV3 and STORM
+numbers, as markdown and JSON, and learning curves per game (PNG, one panel per preset).
+
+It reads ``eval-<policy>.json`` files (written by ``stori-jax eval``) and, for the curves, the
+``episodes.csv`` of each training run (written by ``stori-jax train``), wherever they lie below
+RESULTS_DIR.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import warnings
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+# STORI_SPEC section 11: mean evaluation return ± std over seeds 0, 7, 13 at 100k agent steps
+PAPER_RESULTS = {  # (game, preset): (DreamerV3 mean, std, STORM mean, std)
+    ("Breakout", "1"): (8.67, 0.30, 9.20, 1.72),
+    ("Breakout", "2.1"): (13.80, 3.26, 16.44, 2.03),
+    ("Breakout", "2.2"): (14.86, 1.74, 20.45, 2.92),
+    ("Breakout", "3.1"): (60.71, 41.89, 24.17, 3.55),
+    ("Breakout", "3.2A"): (10.65, 0.41, 12.05, 0.89),
+    ("Breakout", "3.2B"): (3.57, 1.43, 6.48, 2.50),
+    ("Breakout", "3.2C"): (1.89, 0.49, 3.96, 1.42),
+    ("Boxing", "1"): (39.32, 6.79, 29.48, 15.41),
+    ("Boxing", "2.1"): (43.00, 31.98, 54.69, 20.44),
+    ("Boxing", "2.2"): (42.21, 35.54, 22.44, 3.54),
+    ("Boxing", "3.1"): (84.22, 1.68, 86.18, 11.29),
+    ("Boxing", "3.2A"): (86.90, 1.33, 85.22, 11.77),
+    ("Boxing", "3.2B"): (61.74, 17.71, 45.41, 26.56),
+    ("Boxing", "3.2C"): (56.52, 18.45, 52.66, 25.68),
+    ("Gopher", "1"): (1137.00, 56.98, 1303.53, 724.76),
+    ("Gopher", "2.1"): (11333.53, 14761.12, 950.67, 188.37),
+    ("Gopher", "2.2"): (2190.87, 407.24, 2315.40, 893.32),
+    ("Gopher", "3.1"): (3235.27, 443.51, 3811.67, 2431.85),
+    ("Gopher", "3.2"): (1521.13, 451.45, 936.40, 106.83),
+    ("BankHeist", "1"): (197.63, 20.76, 128.03, 31.41),
+    ("BankHeist", "2.1"): (663.60, 587.85, 467.80, 507.74),
+    ("BankHeist", "2.2"): (682.67, 476.90, 267.70, 295.86),
+    ("BankHeist", "3.1"): (562.30, 320.74, 1015.73, 148.43),
+    ("BankHeist", "3.2"): (849.80, 514.15, 43.10, 22.85),
+}
+EVAL_KEYS = ("game", "preset", "agent", "policy", "train_seed", "mean_return", "episodes")
+
+
+def load_evaluations(results_dir: Path) -> list[dict]:
+    """Every eval-*.json below ``results_dir`` (each must hold the keys of EVAL_KEYS)."""
+    results_dir = Path(results_dir)
+    if not results_dir.is_dir():
+        raise ValueError(f"RESULTS_DIR {results_dir} is not a directory")
+    found = []
+    for path in sorted(results_dir.rglob("eval-*.json")):
+        try:
+            result = json.loads(path.read_text())
+        except json.JSONDecodeError as e:
+            raise ValueError(f"{path} is not valid JSON: {e}") from None
+        missing = [k for k in EVAL_KEYS if k not in result]
+        if missing:
+            raise ValueError(f"{path} lacks {missing}: not a stori-jax evaluation")
+        found.append(dict(result, path=str(path)))
+    if not found:
+        raise ValueError(f"no eval-*.json under {results_dir}: run `stori-jax eval` first")
+    return found
+
+
+def aggregate(evaluations: list[dict], ppo_policy: str = "sampled") -> list[dict]:
+    """One row per (game, preset): per agent, the mean over seeds of each seed's mean return,
+    and the standard deviation over seeds (ddof=1, as usual for 'mean ± std over 3 seeds')."""
+    if ppo_policy not in ("sampled", "greedy"):
+        raise ValueError(f"ppo_policy must be 'sampled' or 'greedy', got {ppo_policy!r}")
+    per_cell = defaultdict(lambda: defaultdict(dict))
+    for e in evaluations:
+        column = "Random" if e["agent"] == "random" else (
+            "PPO" if e["policy"] == ppo_policy else None)
+        if column is None:
+            continue
+        seeds = per_cell[(e["game"], e["preset"])][column]
+        if e["train_seed"] in seeds:
+            raise ValueError(f"two {column} evaluations of {e['game']} {e['preset']} seed "
+                             f"{e['train_seed']}: {seeds[e['train_seed']]['path']} and {e['path']}")
+        seeds[e["train_seed"]] = e
+    rows = []
+    for (game, preset), columns in sorted(per_cell.items(), key=lambda kv: _order(*kv[0])):
+        row = dict(game=game, preset=preset)
+        for column in ("PPO", "Random"):
+            seeds = columns.get(column, {})
+            means = [seeds[s]["mean_return"] for s in sorted(seeds)]
+            row[column] = dict(
+                seeds=sorted(seeds), per_seed=means,
+                episodes=[seeds[s]["episodes"] for s in sorted(seeds)],
+                mean=float(np.mean(means)) if means else None,
+                std=float(np.std(means, ddof=1)) if len(means) > 1 else None)
+        paper = PAPER_RESULTS.get((game, preset))
+        row["DreamerV3"] = None if paper is None else dict(mean=paper[0], std=paper[1])
+        row["STORM"] = None if paper is None else dict(mean=paper[2], std=paper[3])
+        rows.append(row)
+    return rows
+
+
+def _order(game: str, preset: str):
+    games = ["Breakout", "Boxing", "Gopher", "BankHeist"]
+    return (games.index(game) if game in games else len(games), game, preset)
+
+
+def _cell(entry) -> str:
+    if entry is None or entry.get("mean") is None:
+        return "-"
+    if entry.get("std") is None:
+        return f"{entry['mean']:.2f} (1 seed)"
+    return f"{entry['mean']:.2f} ± {entry['std']:.2f}"
+
+
+def markdown(rows: list[dict]) -> str:
+    lines = ["| game | preset | PPO (ours) | Random (ours) | DreamerV3 (paper) | STORM (paper) | "
+             "seeds (PPO) | episodes per seed |", "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        seeds = ", ".join(str(s) for s in r["PPO"]["seeds"]) or "-"
+        episodes = sorted(set(r["PPO"]["episodes"] + r["Random"]["episodes"]))
+        lines.append(f"| {r['game']} | {r['preset']} | {_cell(r['PPO'])} | {_cell(r['Random'])}"
+                     f" | {_cell(r['DreamerV3'])} | {_cell(r['STORM'])} | {seeds} | "
+                     f"{', '.join(map(str, episodes))} |")
+    return "\n".join(lines) + "\n"
+
+
+def learning_curves(results_dir: Path) -> dict[tuple[str, str], list[tuple[np.ndarray, ...]]]:
+    """Per (game, preset), per training run: (global_step, episode return) of every episode."""
+    curves = defaultdict(list)
+    for path in sorted(Path(results_dir).rglob("episodes.csv")):
+        config_path = path.parent / "config.json"
+        if not config_path.exists():
+            continue
+        config = json.loads(config_path.read_text())
+        with open(path, newline="") as f:
+            rows = list(csv.DictReader(f))
+        steps = np.array([int(r["global_step"]) for r in rows])
+        returns = np.array([float(r["return"]) for r in rows])
+        curves[(config["game"], config["preset"])].append((steps, returns, config["seed"]))
+    return curves
+
+
+def smoothed(steps: np.ndarray, returns: np.ndarray, grid: np.ndarray, window: int) -> np.ndarray:
+    """Mean return of the ``window`` latest episodes finished by each grid step (NaN before
+    the first)."""
+    out = np.full(grid.shape, np.nan)
+    for j, g in enumerate(grid):
+        done = returns[steps <= g]
+        if done.size:
+            out[j] = done[-window:].mean()
+    return out
+
+
+def plot_curves(results_dir: Path, out_dir: Path, window: int = 20) -> list[Path]:
+    """One PNG per game: a panel per preset, each seed's smoothed curve and their mean, with the
+    random policy's evaluation mean as a dashed line where one exists."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    curves = learning_curves(results_dir)
+    random_means = defaultdict(list)
+    for e in load_evaluations(results_dir):
+        if e["agent"] == "random":
+            random_means[(e["game"], e["preset"])].append(e["mean_return"])
+    written = []
+    for game in sorted({g for g, _ in curves}, key=lambda g: _order(g, "")):
+        presets = sorted((p for g, p in curves if g == game), key=lambda p: _order(game, p))
+        fig, axes = plt.subplots(1, len(presets), figsize=(4 * len(presets), 3.2),
+                                 squeeze=False, sharey=True)
+        for ax, preset in zip(axes[0], presets):
+            runs = curves[(game, preset)]
+            end = max(int(s.max()) if s.size else 0 for s, _, _ in runs)
+            grid = np.linspace(0, max(end, 1), 100)
+            lines = []
+            for steps, returns, seed in runs:
+                line = smoothed(steps, returns, grid, window)
+                lines.append(line)
+                ax.plot(grid, line, lw=0.8, alpha=0.5, label=f"seed {seed}")
+            with warnings.catch_warnings():  # grid points before any seed's first episode
+                warnings.simplefilter("ignore", RuntimeWarning)
+                mean = np.nanmean(np.array(lines), axis=0)
+            ax.plot(grid, mean, color="black", lw=1.6, label="mean over seeds")
+            if random_means.get((game, preset)):
+                ax.axhline(np.mean(random_means[(game, preset)]), color="grey", ls="--",
+                           label="random policy (eval)")
+            ax.set_title(f"{game} {preset}")
+            ax.set_xlabel("agent steps")
+            ax.grid(alpha=0.3)
+        axes[0][0].set_ylabel(f"episode return (mean of last {window})")
+        axes[0][-1].legend(fontsize=7)
+        fig.tight_layout()
+        out_dir.mkdir(parents=True, exist_ok=True)
+        path = out_dir / f"curves-{game}.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        written.append(path)
+    return written
+
+
+def build_table(results_dir: Path, out_dir: Path | None = None,
+                ppo_policy: str = "sampled") -> tuple[str, list[Path]]:
+    """Write table.md, table.json and curves-<game>.png into ``out_dir`` (default
+    ``results_dir``); returns (the markdown, the paths written)."""
+    results_dir = Path(results_dir)
+    out_dir = Path(out_dir) if out_dir is not None else results_dir
+    rows = aggregate(load_evaluations(results_dir), ppo_policy)
+    text = markdown(rows)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "table.md").write_text(text)
+    (out_dir / "table.json").write_text(json.dumps(dict(ppo_policy=ppo_policy, rows=rows),
+                                                   indent=1))
+    return text, [out_dir / "table.md", out_dir / "table.json", *plot_curves(results_dir,
+                                                                                out_dir)]

@@ -1,0 +1,288 @@
+"""The PPO baseline, the evaluation protocol, the results table and their command line, on
+tiny networks and budgets."""
+
+from __future__ import annotations
+
+import csv
+import json
+import pickle
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from baselines import ppo
+from baselines.evaluate import episode_quotas, evaluate, write_result
+from baselines.table import PAPER_RESULTS, aggregate, build_table, load_evaluations, smoothed
+from stori_jax.cli import main
+
+TINY = dict(game="Breakout", preset="1", network="tiny", num_envs=4, num_steps=16,
+            num_minibatches=2, update_epochs=2, total_steps=192, checkpoint_every=1)
+
+
+def tiny(**kw) -> ppo.PPOConfig:
+    return ppo.PPOConfig(**{**TINY, **kw})
+
+
+# -- network and update -----------------------------------------------------------------------
+
+@pytest.mark.parametrize("features,kernel,stride,size", [(32, 8, 4, 84), (64, 4, 2, 20),
+                                                         (64, 3, 1, 9)])
+def test_conv_is_the_usual_convolution(features, kernel, stride, size):
+    x = jax.random.uniform(jax.random.PRNGKey(0), (2, size, size, 5))
+    conv = ppo.Conv(features, kernel, stride)
+    params = conv.init(jax.random.PRNGKey(1), x)
+    dense = params["params"]["Dense_0"]
+    k = kernel // stride
+    # the dense kernel's rows, regrouped as the (kernel, kernel, in, out) conv kernel
+    w = dense["kernel"].reshape(k, k, stride, stride, 5, features).transpose(0, 2, 1, 3, 4, 5)
+    w = w.reshape(kernel, kernel, 5, features)
+    expected = jax.lax.conv_general_dilated(x, w, (stride, stride), "VALID",
+                                            dimension_numbers=("NHWC", "HWIO", "NHWC"))
+    np.testing.assert_allclose(conv.apply(params, x), expected + dense["bias"], rtol=1e-4,
+                               atol=1e-4)
+
+
+def test_nature_torso_has_the_nature_shapes():
+    net = ppo.ActorCritic(num_actions=4, network="nature")
+    params = net.init(jax.random.PRNGKey(0), jnp.zeros((1, 84, 84, 4), jnp.uint8))
+    sizes = [p["Dense_0"]["kernel"].shape for name, p in params["params"].items()
+             if name.startswith("Conv")]
+    assert sizes == [(8 * 8 * 4, 32), (4 * 4 * 32, 64), (3 * 3 * 64, 64)]
+    assert params["params"]["Dense_0"]["kernel"].shape == (7 * 7 * 64, 512)
+
+
+def synthetic_rollout(config, network, params, seed=0):
+    k = jax.random.split(jax.random.PRNGKey(seed), 4)
+    t, b = config.num_steps, config.num_envs
+    obs = jax.random.randint(k[0], (t, b, 84, 84, 4), 0, 256).astype(jnp.uint8)
+    action, logp, value = jax.vmap(lambda o, kk: ppo.act(network, params, o, kk))(
+        obs, jax.random.split(k[1], t))
+    reward = jnp.sign(jax.random.normal(k[2], (t, b))) * (jax.random.uniform(k[3], (t, b)) < .3)
+    done = jnp.zeros((t, b), bool).at[t // 2, 0].set(True)
+    return ppo.Rollout(obs, action, logp, value, reward, done)
+
+
+def test_an_update_lowers_the_loss_on_a_fixed_batch():
+    config = tiny(learning_rate=1e-3, update_epochs=4)
+    network = ppo.make_network(config, 4)
+    params = network.init(jax.random.PRNGKey(0), jnp.zeros((1, 84, 84, 4), jnp.uint8))
+    optimizer = ppo.make_optimizer(config)
+    rollout = synthetic_rollout(config, network, params)
+    last_obs = rollout.obs[-1]
+    _, last_value = network.apply(params, last_obs)
+    advantages, targets = ppo.gae(rollout, last_value, config.gamma, config.gae_lambda)
+    flat = jax.tree.map(lambda x: x.reshape(config.batch_size, *x.shape[2:]),
+                        (rollout.obs, rollout.action, rollout.logp, rollout.value, advantages,
+                         targets))
+    before, _ = ppo.ppo_loss(network, config, params, flat)
+    update = ppo.make_update(network, optimizer, config)
+    new_params, _, metrics = update(params, optimizer.init(params), rollout, last_obs,
+                                    jax.random.PRNGKey(1))
+    after, _ = ppo.ppo_loss(network, config, new_params, flat)
+    assert float(after) < float(before) - 1e-3, (before, after)
+    assert 0 <= float(metrics["clipfrac"]) <= 1 and np.isfinite(float(metrics["approx_kl"]))
+
+
+def test_gae_by_hand():
+    rollout = ppo.Rollout(obs=None, action=None, logp=None,
+                          value=jnp.array([[0.5], [1.0]]), reward=jnp.array([[1.0], [0.0]]),
+                          done=jnp.array([[False], [True]]))
+    adv, ret = ppo.gae(rollout, jnp.array([7.0]), gamma=0.9, lam=0.5)
+    # step 1 ends the episode: its delta ignores the bootstrap value 7
+    d1 = 0.0 - 1.0
+    d0 = 1.0 + 0.9 * 1.0 - 0.5
+    np.testing.assert_allclose(adv[:, 0], [d0 + 0.9 * 0.5 * d1, d1], rtol=1e-6)
+    np.testing.assert_allclose(ret, adv + rollout.value)
+
+
+# -- training runs: determinism and resume ----------------------------------------------------
+
+def read_log(path):
+    with open(path / "log.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    return [{k: v for k, v in r.items() if k not in ppo.TIMING_FIELDS} for r in rows]
+
+
+def read_checkpoint(path):
+    with open(path / "checkpoint.pkl", "rb") as f:
+        return pickle.load(f)
+
+
+def assert_trees_equal(a, b):
+    la, lb = jax.tree.leaves(a), jax.tree.leaves(b)
+    assert len(la) == len(lb)
+    for x, y in zip(la, lb):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory):
+    out = tmp_path_factory.mktemp("full")
+    summary = ppo.train(tiny(), out, progress=False)
+    return out, summary
+
+
+def test_training_writes_its_files(uninterrupted):
+    out, summary = uninterrupted
+    assert summary["finished"] and summary["agent_steps"] == 3 * 64
+    assert {p.name for p in out.iterdir()} >= {"config.json", "log.csv", "episodes.csv",
+                                              "checkpoint.pkl", "summary.json"}
+    log = read_log(out)
+    assert [int(r["global_step"]) for r in log] == [64, 128, 192]
+    assert json.loads((out / "config.json").read_text())["network"] == "tiny"
+
+
+def test_resume_reproduces_the_uninterrupted_run(uninterrupted, tmp_path):
+    full, _ = uninterrupted
+    partial = ppo.train(tiny(), tmp_path, progress=False, stop_after=1)
+    assert not partial["finished"] and not (tmp_path / "summary.json").exists()
+    assert len(read_log(tmp_path)) == 1
+    ppo.train(tiny(), tmp_path, resume=True, progress=False)
+    assert read_log(tmp_path) == read_log(full)
+    assert (tmp_path / "episodes.csv").read_text() == (full / "episodes.csv").read_text()
+    a, b = read_checkpoint(full), read_checkpoint(tmp_path)
+    assert_trees_equal((a["params"], a["opt_state"], a["key"], a["obs"]),
+                       (b["params"], b["opt_state"], b["key"], b["obs"]))
+
+
+def test_same_seed_same_updates_other_seed_others(uninterrupted, tmp_path):
+    full, _ = uninterrupted
+    ppo.train(tiny(), tmp_path / "same", progress=False, stop_after=1)
+    first = read_log(full)[0]
+    assert read_log(tmp_path / "same") == [first]
+    ppo.train(tiny(seed=1), tmp_path / "other", progress=False, stop_after=1)
+    assert read_log(tmp_path / "other")[0]["pg_loss"] != first["pg_loss"]
+
+
+def test_resume_refuses_another_config(uninterrupted, tmp_path):
+    full, _ = uninterrupted
+    ppo.train(tiny(total_steps=64), tmp_path, progress=False)
+    with pytest.raises(ValueError, match="different config"):
+        ppo.train(tiny(total_steps=64, ent_coef=0.5), tmp_path, resume=True, progress=False)
+    with pytest.raises(ValueError, match="does not exist"):
+        ppo.train(tiny(), tmp_path / "nothing", resume=True, progress=False)
+
+
+@pytest.mark.parametrize("kw,match", [
+    (dict(num_envs=3), "num_envs must be even"), (dict(network="resnet"), "network must be"),
+    (dict(num_minibatches=5), "divisible"), (dict(gamma=1.5), "gamma"),
+    (dict(preset="9.9"), "preset"), (dict(game="Pong2"), "game"), (dict(seed=-1), "seed"),
+])
+def test_bad_hyperparameters_are_named(kw, match):
+    with pytest.raises(ValueError, match=match):
+        tiny(**kw)
+
+
+def test_overrides_are_typed():
+    config = ppo.PPOConfig.from_overrides(tiny(), {"learning_rate": "1e-3", "anneal_lr": "false",
+                                                   "num_envs": "8"})
+    assert (config.learning_rate, config.anneal_lr, config.num_envs) == (1e-3, False, 8)
+    with pytest.raises(ValueError, match="num_envs must be a int"):
+        ppo.PPOConfig.from_overrides(tiny(), {"num_envs": "eight"})
+
+
+# -- evaluation -------------------------------------------------------------------------------
+
+def test_quotas_split_the_episodes():
+    assert list(episode_quotas(100, 16)) == [7] * 4 + [6] * 12
+    assert episode_quotas(5, 5).sum() == 5
+
+
+def test_random_evaluation_is_reproducible_and_exact_in_count(tmp_path):
+    kw = dict(policy="random", episodes=3, num_envs=2, max_episode_frames=800, progress=False)
+    a = evaluate("Breakout", "3.1", **kw)
+    b = evaluate("Breakout", "3.1", **kw)
+    assert a["returns"] == b["returns"] and len(a["returns"]) == 3
+    assert a["eval_seed"] == 10_000 and a["agent"] == "random"
+    assert write_result(a, tmp_path).name == "eval-random.json"
+
+
+@pytest.mark.parametrize("policy", ["greedy", "sampled"])
+def test_checkpoint_evaluation(uninterrupted, policy):
+    full, _ = uninterrupted
+    result = evaluate("Breakout", "1", policy=policy, episodes=2, num_envs=2,
+                      checkpoint=full / "checkpoint.pkl", max_episode_frames=400,
+                      progress=False)
+    assert len(result["returns"]) == 2 and result["agent"] == "ppo"
+    with pytest.raises(ValueError, match="trained on Breakout 1"):
+        evaluate("Breakout", "3.1", policy=policy, episodes=1,
+                 checkpoint=full / "checkpoint.pkl", progress=False)
+
+
+# -- the table --------------------------------------------------------------------------------
+
+def fake_eval(root, game, preset, agent, seed, mean, policy=None):
+    policy = policy or ("random" if agent == "random" else "sampled")
+    write_result(dict(game=game, preset=preset, agent=agent, policy=policy, train_seed=seed,
+                      mean_return=mean, episodes=100), root / f"{game}-{preset}" /
+                 f"{agent}-seed{seed}")
+
+
+def test_table_aggregates_seeds_beside_the_paper(tmp_path):
+    for seed, mean in ((0, 1.0), (7, 2.0), (13, 3.0)):
+        fake_eval(tmp_path, "Breakout", "3.1", "ppo", seed, mean)
+        fake_eval(tmp_path, "Breakout", "3.1", "ppo", seed, 100.0, policy="greedy")
+        fake_eval(tmp_path, "Breakout", "3.1", "random", seed, 1.5)
+    fake_eval(tmp_path, "Boxing", "1", "ppo", 0, -4.0)
+    run = tmp_path / "Breakout-3.1" / "ppo-seed0"
+    (run / "config.json").write_text(json.dumps(dict(game="Breakout", preset="3.1", seed=0)))
+    (run / "episodes.csv").write_text("global_step,env,return,length\n10,0,1.0,5\n20,1,3.0,9\n")
+    text, paths = build_table(tmp_path, tmp_path / "out")
+    lines = text.splitlines()
+    assert lines[2].startswith("| Breakout | 3.1 | 2.00 ± 1.00 | 1.50 ± 0.00 | 60.71 ± 41.89 | "
+                               "24.17 ± 3.55 | 0, 7, 13 | 100 |")
+    assert lines[3].startswith("| Boxing | 1 | -4.00 (1 seed) | - | 39.32 ± 6.79 |")
+    assert "| 100.00 ± 0.00 |" in build_table(tmp_path, tmp_path / "g", ppo_policy="greedy")[0]
+    assert (tmp_path / "out" / "curves-Breakout.png").stat().st_size > 1000
+    assert json.loads((tmp_path / "out" / "table.json").read_text())["rows"][0]["PPO"][
+        "per_seed"] == [1.0, 2.0, 3.0]
+    assert len(PAPER_RESULTS) == 24
+
+
+def test_table_errors(tmp_path):
+    with pytest.raises(ValueError, match="no eval"):
+        load_evaluations(tmp_path)
+    fake_eval(tmp_path, "Breakout", "3.1", "ppo", 0, 1.0)
+    fake_eval(tmp_path / "copy", "Breakout", "3.1", "ppo", 0, 2.0)
+    with pytest.raises(ValueError, match="two PPO evaluations"):
+        aggregate(load_evaluations(tmp_path))
+    (tmp_path / "bad").mkdir()
+    (tmp_path / "bad" / "eval-x.json").write_text("{}")
+    with pytest.raises(ValueError, match="lacks"):
+        load_evaluations(tmp_path)
+
+
+def test_smoothing_is_the_mean_of_the_latest_episodes():
+    out = smoothed(np.array([1, 2, 3]), np.array([1.0, 2.0, 6.0]), np.array([0, 2, 3]), 2)
+    assert np.isnan(out[0]) and out[1] == 1.5 and out[2] == 4.0
+
+
+# -- the command line -------------------------------------------------------------------------
+
+@pytest.mark.parametrize("argv,match", [
+    (["train", "ppo", "--game", "Pong2"], "unknown game"),
+    (["train", "ppo", "--game", "Breakout", "--preset", "4"], "preset"),
+    (["train", "ppo", "--game", "Breakout", "--set", "lr"], "FIELD=VALUE"),
+    (["train", "ppo", "--game", "Breakout", "--set", "nope=1"], "unknown PPO hyperparameter"),
+    (["train", "ppo", "--game", "Breakout", "--set", "seed=3"], "--seed"),
+    (["train", "ppo", "--game", "Breakout", "--steps", "0"], "total_steps"),
+    (["eval"], "--checkpoint PATH or --random"),
+    (["eval", "--random", "--game", "Breakout"], "--game and --preset"),
+    (["eval", "--checkpoint", "/nonexistent.pkl"], "does not exist"),
+    (["table", "/nonexistent"], "not a directory"),
+])
+def test_cli_errors_are_clear(argv, match, capsys):
+    assert main(argv) == 2
+    assert match in capsys.readouterr().err
+
+
+def test_cli_train_refuses_to_overwrite_and_evaluates(uninterrupted, tmp_path, capsys):
+    full, _ = uninterrupted
+    assert main(["train", "ppo", "--game", "Breakout", "--out", str(full), "--quiet"]) == 2
+    assert "--resume" in capsys.readouterr().err
+    assert main(["eval", "--checkpoint", str(full / "checkpoint.pkl"), "--episodes", "1",
+                 "--policy", "greedy", "--num-envs", "1", "--out", str(tmp_path), "--quiet",
+                 "--preset", "3.1"]) == 2
+    assert "differs from the checkpoint" in capsys.readouterr().err
