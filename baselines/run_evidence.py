@@ -46,12 +46,48 @@ def stage_train() -> None:
                   f"{summary['env_only_sps']:.0f} env-only SPS", flush=True)
 
 
+EVAL_EPISODES, EVAL_ENVS = 100, 20
+
+
+def stage_eval() -> None:
+    """Sampled-policy evaluation of every PPO run, and the random policy, same protocol."""
+    from baselines.evaluate import evaluate, write_result
+
+    for seed in SEEDS:
+        for game, preset in RUNS:
+            jobs = [("ppo", "sampled", run_dir(game, preset, "ppo", seed) / "checkpoint.pkl"),
+                    ("random", "random", None)]
+            for agent, policy, checkpoint in jobs:
+                out = run_dir(game, preset, agent, seed)
+                if (out / f"eval-{policy}.json").exists() or (
+                        checkpoint is not None and not checkpoint.exists()):
+                    continue
+                result = evaluate(game, preset, policy=policy, episodes=EVAL_EPISODES,
+                                  seed=seed, num_envs=EVAL_ENVS, checkpoint=checkpoint)
+                if checkpoint is not None:  # file the checkpoint as the repository names it
+                    result["checkpoint"] = str(checkpoint.relative_to(RESULTS))
+                write_result(result, out)
+                print(f"{game} {preset} seed {seed} {policy}: {result['mean_return']:.2f}",
+                      flush=True)
+
+
+def stage_table() -> None:
+    from baselines.table import build_table
+
+    text, _ = build_table(RESULTS / "runs", RESULTS)
+    print(text)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--stage", default="all", choices=["train", "eval", "table", "all"])
     args = parser.parse_args()
     if args.stage in ("train", "all"):
         stage_train()
+    if args.stage in ("eval", "all"):
+        stage_eval()
+    if args.stage in ("table", "all"):
+        stage_table()
 
 
 if __name__ == "__main__":

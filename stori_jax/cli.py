@@ -33,15 +33,15 @@ def _cmd_list(args) -> int:
 
 def _cmd_run(args) -> int:
     import stori_jax
-    from stori_jax.suite import play_random
+    from stori_jax.suite import play
 
     env = stori_jax.make(args.game, args.preset, num_envs=args.num_envs, seed=args.seed,
                          num_workers=args.num_workers, obs=args.obs,
                          granularity=args.granularity)
     print(f"{env}")
     with env:
-        env.reset()
-        stats = play_random(env, args.seed, max_steps=args.steps,
+        obs, _ = env.reset()
+        stats = play(env, obs, args.seed, max_steps=args.steps,
                             progress=None if args.quiet else f"{args.game} {args.preset or '3.1'}")
     env_steps = args.steps * env.num_envs
     mean = stats["mean_return"]
@@ -77,9 +77,15 @@ def _cmd_suite(args) -> int:
                         ("--max-steps", args.max_steps)):
         if value < 1:
             raise ValueError(f"{name} must be >= 1, got {value}")
-    out = run_suite(_selected_presets(args.games, args.presets), episodes=args.episodes,
+    games = args.games
+    if args.checkpoint is not None and not games:  # a checkpoint plays its own game
+        from baselines.ppo import load_checkpoint
+
+        games = [load_checkpoint(args.checkpoint)["config"]["game"]]
+    out = run_suite(_selected_presets(games, args.presets), episodes=args.episodes,
                     num_envs=args.num_envs, max_steps=args.max_steps, seed=args.seed,
-                    out=args.out, gallery=not args.no_gallery, progress=not args.quiet)
+                    out=args.out, gallery=not args.no_gallery, progress=not args.quiet,
+                    checkpoint=args.checkpoint)
     print((out / "table.md").read_text())
     print(f"wrote {out}/table.md, {out}/results.json" + ("" if args.no_gallery
                                                          else f" and {out}/gallery/"))
@@ -148,6 +154,9 @@ def build_parser() -> argparse.ArgumentParser:
     suite.add_argument("--max-steps", type=int, default=2500,
                        help="agent steps per preset at most (if episodes are long)")
     suite.add_argument("--seed", type=int, default=0)
+    suite.add_argument("--checkpoint", type=Path, default=None,
+                       help="play a trained PPO checkpoint's policy (sampled) instead of the "
+                            "random one; it plays its own game's presets")
     suite.add_argument("--out", type=Path, default=None, help="default results/suite-<date>")
     suite.add_argument("--no-gallery", action="store_true")
     suite.add_argument("--quiet", action="store_true")

@@ -1,5 +1,6 @@
-"""``stori-jax suite``: every paper preset (or a subset) for N episodes with a random agent,
-a results table (markdown + JSON) and a gallery of contact sheets."""
+"""``stori-jax suite``: every paper preset (or a subset) for N episodes with an agent (the
+uniformly random policy, or a trained checkpoint's), a results table (markdown + JSON) and a
+gallery of contact sheets."""
 
 from __future__ import annotations
 
@@ -11,13 +12,33 @@ from pathlib import Path
 import numpy as np
 
 
-def play_random(env, seed: int, *, max_steps: int, episodes: int | None = None,
-                progress: str | None = None) -> dict:
-    """Step ``env`` (already reset) with uniform random actions from ``seed``'s key for
-    ``max_steps`` agent steps, or until ``episodes`` episodes ended; count what happened."""
+def random_policy(num_actions: int):
+    """policy(obs, key) -> (B,) uniformly random actions."""
+    import jax
+
+    return jax.jit(lambda obs, key: jax.random.randint(key, (obs.shape[0],), 0, num_actions))
+
+
+def checkpoint_policy(checkpoint: Path):
+    """(game, policy(obs, key) -> (B,) actions sampled from a PPO checkpoint's policy)."""
+    import jax
+
+    from baselines.ppo import load_policy
+
+    config, network, params = load_policy(checkpoint)
+    return config.game, jax.jit(
+        lambda obs, key: jax.random.categorical(key, network.apply(params, obs)[0]))
+
+
+def play(env, obs, seed: int, *, max_steps: int, episodes: int | None = None,
+         progress: str | None = None, policy=None) -> dict:
+    """Step ``env`` from ``obs`` (its reset's) under ``policy(obs, key)`` (default: uniformly
+    random), keys from ``seed``, for ``max_steps`` agent steps or until ``episodes`` episodes
+    ended; count what happened."""
     import jax
     from tqdm import tqdm
 
+    policy = policy or random_policy(env.num_actions)
     key = jax.random.PRNGKey(seed)
     returns, events, corrupted, slots, masked, switches, steps = [], 0, 0, 0, 0, 0, 0
     previous_concept = np.zeros(env.num_envs, np.int32)
@@ -25,8 +46,7 @@ def play_random(env, seed: int, *, max_steps: int, episodes: int | None = None,
     start = time.perf_counter()
     while steps < max_steps and (episodes is None or len(returns) < episodes):
         key, k = jax.random.split(key)
-        actions = jax.random.randint(k, (env.num_envs,), 0, env.num_actions)
-        _, _, terminated, truncated, info = env.step(actions)
+        obs, _, terminated, truncated, info = env.step(policy(obs, k))
         done = np.asarray(terminated | truncated)
         returns.extend(np.asarray(info["episode_return"])[done].tolist())
         events += int(np.asarray(info["event_fired"]).sum())
@@ -50,13 +70,13 @@ def play_random(env, seed: int, *, max_steps: int, episodes: int | None = None,
 
 
 def run_preset(game: str, name: str, *, episodes: int, num_envs: int, max_steps: int,
-               seed: int) -> dict:
-    """Random play until ``episodes`` episodes ended (or ``max_steps`` agent steps)."""
+               seed: int, policy=None) -> dict:
+    """Play until ``episodes`` episodes ended (or ``max_steps`` agent steps)."""
     import stori_jax
 
     with stori_jax.make(game, name, num_envs=num_envs, seed=seed, obs="atari84") as env:
-        env.reset()
-        stats = play_random(env, seed, max_steps=max_steps, episodes=episodes)
+        obs, _ = env.reset()
+        stats = play(env, obs, seed, max_steps=max_steps, episodes=episodes, policy=policy)
     return dict(game=game, preset=name, definition=stori_jax.describe_preset(game, name),
                 **stats)
 
@@ -73,25 +93,37 @@ def table(rows: list[dict]) -> str:
 
 
 def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: int,
-              out: Path | None, gallery: bool, progress: bool = True) -> Path:
+              out: Path | None, gallery: bool, progress: bool = True,
+              checkpoint: Path | None = None) -> Path:
+    """Run ``presets`` [(game, name)] with the random policy, or the PPO ``checkpoint``'s
+    (which plays its own game only: every preset must be of that game)."""
     from tqdm import tqdm
 
     import stori_jax
     from stori_jax.visual import contact_sheet
 
     out = Path(out) if out else Path("results") / f"suite-{datetime.date.today().isoformat()}"
+    policy = agent = None
+    if checkpoint is not None:
+        trained_on, policy = checkpoint_policy(checkpoint)
+        others = sorted({g for g, _ in presets if g != trained_on})
+        if others:
+            raise ValueError(f"--checkpoint {checkpoint} plays {trained_on} only; choose its "
+                             f"presets with --games {trained_on} (asked for {others})")
+        agent = str(checkpoint)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     for game, name in tqdm(presets, desc="suite", unit="preset", disable=not progress):
         rows.append(run_preset(game, name, episodes=episodes, num_envs=num_envs,
-                               max_steps=max_steps, seed=seed))
+                               max_steps=max_steps, seed=seed, policy=policy))
         if gallery:
             contact_sheet(game, name, stori_jax.preset(game, name),
                           out / "gallery" / f"{game}-{name}.png", seed=seed)
     (out / "results.json").write_text(json.dumps(dict(
-        seed=seed, episodes=episodes, num_envs=num_envs, max_steps=max_steps, rows=rows),
+        agent=agent or "random", seed=seed, episodes=episodes, num_envs=num_envs,
+        max_steps=max_steps, rows=rows),
         indent=1))
-    text = table(rows)
+    text = f"Agent: {agent or 'uniformly random policy'}\n\n" + table(rows)
     if gallery:
         text += "\nGallery (3.1 twin beside each preset): " + ", ".join(
             f"[{g} {n}](gallery/{g}-{n}.png)" for g, n in presets) + "\n"

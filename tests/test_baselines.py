@@ -286,3 +286,20 @@ def test_cli_train_refuses_to_overwrite_and_evaluates(uninterrupted, tmp_path, c
                  "--policy", "greedy", "--num-envs", "1", "--out", str(tmp_path), "--quiet",
                  "--preset", "3.1"]) == 2
     assert "differs from the checkpoint" in capsys.readouterr().err
+
+
+def test_suite_plays_a_checkpoint_on_its_games_presets(uninterrupted, tmp_path, capsys):
+    full, _ = uninterrupted
+    checkpoint = full / "checkpoint.pkl"
+    assert main(["suite", "--checkpoint", str(checkpoint), "--presets", "3.1", "1",
+                 "--episodes", "1", "--num-envs", "2", "--max-steps", "20", "--no-gallery",
+                 "--quiet", "--out", str(tmp_path)]) == 0
+    results = json.loads((tmp_path / "results.json").read_text())
+    assert results["agent"] == str(checkpoint)
+    assert [(r["game"], r["preset"]) for r in results["rows"]] == [("Breakout", "1"),
+                                                                   ("Breakout", "3.1")]
+    assert all(r["agent_steps"] == 20 for r in results["rows"])
+    capsys.readouterr()
+    assert main(["suite", "--checkpoint", str(checkpoint), "--games", "Boxing", "--quiet",
+                 "--no-gallery", "--out", str(tmp_path)]) == 2
+    assert "plays Breakout only" in capsys.readouterr().err
