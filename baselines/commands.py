@@ -3,6 +3,7 @@ line, registered by :mod:`stori_jax.cli`."""
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 
@@ -84,7 +85,13 @@ def cmd_train(args) -> int:
     if not args.resume and (out / "checkpoint.pkl").exists():
         raise ValueError(f"{out} already holds a run: pass --resume to continue it, or another "
                          "--out")
-    summary = train(config, out, resume=args.resume, progress=not args.quiet)
+    try:
+        summary = train(config, out, resume=args.resume, progress=not args.quiet)
+    except KeyboardInterrupt:
+        if (out / "checkpoint.pkl").exists():
+            print(f"stori-jax: the last checkpoint is in {out}; continue with the same command "
+                  "and --resume", file=sys.stderr)
+        raise
     print(f"trained {summary['agent_steps']} agent steps in {summary['train_seconds']:.0f} s "
           f"({summary['train_sps']:.0f} steps/s); wrote {out}/log.csv, episodes.csv, "
           "checkpoint.pkl, summary.json")
