@@ -216,13 +216,17 @@ class Rollout(NamedTuple):
 
 
 def make_envs(config: PPOConfig):
-    """Two half-batches, each with one emulator worker, so that one emulates while the agent
-    chooses the other's actions.  Seeds 2*seed and 2*seed+1: distinct for distinct seeds."""
+    """Two half-batches with their own emulator workers (none emulated in this process, which
+    chooses actions meanwhile), one core of the machine left for the agent.  Seeds 2*seed and
+    2*seed+1: distinct for distinct seeds.  The split over workers never changes the results."""
     import stori_jax
 
     half = config.num_envs // 2
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    workers = max(1, min(half, ((cores or 2) - 1) // 2))
     return [stori_jax.make(config.game, config.preset, num_envs=half, seed=2 * config.seed + g,
-                           obs="atari84", num_workers=1, inline_envs=0) for g in range(2)]
+                           obs="atari84", num_workers=workers, inline_envs=0)
+            for g in range(2)]
 
 
 def collect(envs, act_fn, params, obs, key, num_steps: int, episodes: list, step0: int):

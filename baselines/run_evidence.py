@@ -9,9 +9,10 @@ table.  Runs already finished are skipped, so the script can be stopped and star
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 from pathlib import Path
+
+import numpy as np
 
 RESULTS = Path(__file__).resolve().parent / "results"
 RUNS = [("Breakout", "3.1"), ("Breakout", "1"), ("Breakout", "3.2C"),
@@ -71,11 +72,32 @@ def stage_eval() -> None:
                       flush=True)
 
 
+def speed_table() -> str:
+    """Training SPS beside the SPS of the same envs stepped without learning, per preset
+    (median over seeds; both measured in the same process, one after the other)."""
+    lines = ["| game | preset | training SPS | env-only SPS | ratio | seeds |",
+             "|---|---|---|---|---|---|"]
+    for game, preset in RUNS:
+        summaries = [json.loads(p.read_text()) for seed in SEEDS
+                     if (p := run_dir(game, preset, "ppo", seed) / "summary.json").exists()]
+        summaries = [s for s in summaries if "env_only_sps" in s]
+        if not summaries:
+            continue
+        train = float(np.median([s["train_sps"] for s in summaries]))
+        env_only = float(np.median([s["env_only_sps"] for s in summaries]))
+        ratio = float(np.median([s["train_to_env_only"] for s in summaries]))
+        lines.append(f"| {game} | {preset} | {train:.0f} | {env_only:.0f} | {ratio:.2f} | "
+                     f"{len(summaries)} |")
+    return "\n".join(lines) + "\n"
+
+
 def stage_table() -> None:
     from baselines.table import build_table
 
     text, _ = build_table(RESULTS / "runs", RESULTS)
-    print(text)
+    speed = speed_table()
+    (RESULTS / "speed.md").write_text(speed)
+    print(text + "\n" + speed)
 
 
 def main() -> None:

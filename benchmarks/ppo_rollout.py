@@ -80,7 +80,10 @@ def measure(config: ppo.PPOConfig, repeats: int) -> dict:
     with stori_jax.make(config.game, config.preset, num_envs=config.num_envs, seed=0,
                         obs="atari84", num_workers=2, inline_envs=0) as env:
         obs, _ = env.reset()
-        run = lambda: sequential_rollout(env, act_fn, params, obs, key, config.num_steps)  # noqa: E731
+
+        def run():
+            sequential_rollout(env, act_fn, params, obs, key, config.num_steps)
+
         run()
         results["rollout_sequential"] = median_rate(run, steps, repeats)
     rollout_s = steps / results["rollout_overlapped"]
