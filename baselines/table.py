@@ -139,6 +139,8 @@ def learning_curves(results_dir: Path) -> dict[tuple[str, str], list[tuple[np.nd
         steps = np.array([int(r["global_step"]) for r in rows])
         returns = np.array([float(r["return"]) for r in rows])
         curves[(config["game"], config["preset"])].append((steps, returns, config["seed"]))
+    for runs in curves.values():
+        runs.sort(key=lambda run: run[2])
     return curves
 
 

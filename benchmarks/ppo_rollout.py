@@ -93,7 +93,7 @@ def measure(config: ppo.PPOConfig, repeats: int) -> dict:
 
 
 def stage_rates(r: dict) -> list[tuple[str, float]]:
-    return [("env only (random actions, two halves)", env_only),
+    return [("env only (random actions, two halves)", r["env_only"]),
             ("PPO rollout, agent overlapping emulation", r["rollout_overlapped"]),
             ("PPO rollout, choose then step (no overlap)", r["rollout_sequential"]),
             ("PPO update alone (agent steps consumed/s)", r["update_per_s"]),
