@@ -15,7 +15,6 @@ import time
 from pathlib import Path
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 POLICIES = ("sampled", "greedy", "random")
@@ -47,23 +46,14 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
     if checkpoint is not None:
         from baselines.ppo import load_policy
 
-        config, network, params = load_policy(checkpoint)
+        config, choose = load_policy(checkpoint, policy)
         if (config.game, config.preset) != (game, preset):
             raise ValueError(f"checkpoint {checkpoint} was trained on {config.game} "
                              f"{config.preset}, not {game} {preset}")
-
-        @jax.jit
-        def choose(obs, key):
-            logits, _ = network.apply(params, obs)
-            if policy == "greedy":
-                return jnp.argmax(logits, axis=-1).astype(jnp.int32)
-            return jax.random.categorical(key, logits).astype(jnp.int32)
     else:
-        num_actions = stori_jax.get_game(game).num_actions
+        from stori_jax.suite import random_policy
 
-        @jax.jit
-        def choose(obs, key):
-            return jax.random.randint(key, (obs.shape[0],), 0, num_actions, jnp.int32)
+        choose = random_policy(stori_jax.get_game(game).num_actions)
 
     quotas = episode_quotas(episodes, num_envs)
     returns = [[] for _ in range(num_envs)]

@@ -507,11 +507,23 @@ def env_only_sps(config: PPOConfig, agent_steps: int = 2048) -> float:
             env.close()
 
 
-def load_policy(checkpoint: Path):
-    """(config, network, params) of a checkpoint, for evaluation."""
+def load_policy(checkpoint: Path, mode: str = "sampled"):
+    """(config, policy(obs, key) -> (B,) int32 actions) of a checkpoint, acting ``sampled``
+    (from its distribution) or ``greedy`` (argmax), jitted."""
+    if mode not in ("sampled", "greedy"):
+        raise ValueError(f"mode must be 'sampled' or 'greedy', got {mode!r}")
     ckpt = load_checkpoint(checkpoint)
     config = PPOConfig(**ckpt["config"])
     import stori_jax
 
-    num_actions = stori_jax.get_game(config.game).num_actions
-    return config, make_network(config, num_actions), ckpt["params"]
+    network = make_network(config, stori_jax.get_game(config.game).num_actions)
+    params = ckpt["params"]
+
+    @jax.jit
+    def policy(obs, key):
+        logits, _ = network.apply(params, obs)
+        if mode == "greedy":
+            return jnp.argmax(logits, axis=-1).astype(jnp.int32)
+        return jax.random.categorical(key, logits).astype(jnp.int32)
+
+    return config, policy

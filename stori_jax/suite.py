@@ -19,17 +19,6 @@ def random_policy(num_actions: int):
     return jax.jit(lambda obs, key: jax.random.randint(key, (obs.shape[0],), 0, num_actions))
 
 
-def checkpoint_policy(checkpoint: Path):
-    """(game, policy(obs, key) -> (B,) actions sampled from a PPO checkpoint's policy)."""
-    import jax
-
-    from baselines.ppo import load_policy
-
-    config, network, params = load_policy(checkpoint)
-    return config.game, jax.jit(
-        lambda obs, key: jax.random.categorical(key, network.apply(params, obs)[0]))
-
-
 def play(env, obs, seed: int, *, max_steps: int, episodes: int | None = None,
          progress: str | None = None, policy=None) -> dict:
     """Step ``env`` from ``obs`` (its reset's) under ``policy(obs, key)`` (default: uniformly
@@ -105,7 +94,10 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
     out = Path(out) if out else Path("results") / f"suite-{datetime.date.today().isoformat()}"
     policy = agent = None
     if checkpoint is not None:
-        trained_on, policy = checkpoint_policy(checkpoint)
+        from baselines.ppo import load_policy
+
+        config, policy = load_policy(checkpoint, "sampled")
+        trained_on = config.game
         others = sorted({g for g, _ in presets if g != trained_on})
         if others:
             raise ValueError(f"--checkpoint {checkpoint} plays {trained_on} only; choose its "

@@ -133,8 +133,12 @@ def test_an_interrupted_step_stays_in_flight_and_can_be_finished():
 
 
 CHILD = textwrap.dedent("""
+    import faulthandler
+    import signal
     import sys
     import numpy as np
+
+    faulthandler.register(signal.SIGUSR1, all_threads=True)  # the test asks for stacks on a hang
     import stori_jax
 
     env = stori_jax.make("Breakout", num_envs=2, seed=0, num_workers=2, obs="ram")
@@ -163,10 +167,13 @@ def test_ctrl_c_exits_and_leaves_no_worker(tmp_path):
         assert child.poll() is None
         os.killpg(child.pid, signal.SIGINT)
         try:
-            child.wait(timeout=10)
+            _, stderr = child.communicate(timeout=30)  # reading stderr: a full pipe cannot block it
         except subprocess.TimeoutExpired:
-            pytest.fail("the child did not exit on SIGINT")
-        stderr = child.stderr.read()
+            child.send_signal(signal.SIGUSR1)
+            time.sleep(1.0)
+            child.kill()
+            _, stderr = child.communicate()
+            pytest.fail(f"the child did not exit on SIGINT; its stacks:\n{stderr[-6000:]}")
         assert child.returncode != 0 and "KeyboardInterrupt" in stderr, stderr[-2000:]
         assert wait_gone(pids, 5.0), [p for p in pids if not process_gone(p)]
     finally:
