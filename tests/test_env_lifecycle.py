@@ -139,6 +139,12 @@ CHILD = textwrap.dedent("""
     import numpy as np
 
     faulthandler.register(signal.SIGUSR1, all_threads=True)  # the test asks for stacks on a hang
+    # a terminal's Ctrl-C reaches a Python started with default signal handling; a child of the
+    # test runner may inherit SIGINT ignored or blocked instead: record that, then start clean
+    print(f"inherited: SIGINT handler {signal.getsignal(signal.SIGINT)!r}, blocked "
+          f"{sorted(signal.pthread_sigmask(signal.SIG_BLOCK, []))}", file=sys.stderr, flush=True)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     import stori_jax
 
     env = stori_jax.make("Breakout", num_envs=2, seed=0, num_workers=2, obs="ram")
@@ -173,7 +179,8 @@ def test_ctrl_c_exits_and_leaves_no_worker(tmp_path):
             time.sleep(1.0)
             child.kill()
             _, stderr = child.communicate()
-            pytest.fail(f"the child did not exit on SIGINT; its stacks:\n{stderr[-6000:]}")
+            pytest.fail(f"the child did not exit on SIGINT; its stderr and stacks:\n"
+                        f"{stderr[:3000]}\n...\n{stderr[-4000:]}")
         assert child.returncode != 0 and "KeyboardInterrupt" in stderr, stderr[-2000:]
         assert wait_gone(pids, 5.0), [p for p in pids if not process_gone(p)]
     finally:
