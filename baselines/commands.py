@@ -63,8 +63,12 @@ def _parse_overrides(items: list[str]) -> dict[str, str]:
     return overrides
 
 
-def default_run_dir(game: str, preset: str, agent: str, seed: int) -> Path:
-    return Path("results") / "train" / f"{game}-{preset}" / f"{agent}-seed{seed}"
+def run_dir(root: Path, game: str, preset: str, agent: str, seed: int) -> Path:
+    """Where a run's files live: ``root``/<game>-<preset>/<agent>-seed<seed>."""
+    return Path(root) / f"{game}-{preset}" / f"{agent}-seed{seed}"
+
+
+DEFAULT_ROOT = Path("results") / "train"
 
 
 def cmd_train(args) -> int:
@@ -81,7 +85,7 @@ def cmd_train(args) -> int:
     config = PPOConfig.from_overrides(
         PPOConfig(game=args.game, preset=args.preset, seed=args.seed, total_steps=args.steps),
         overrides)
-    out = args.out or default_run_dir(config.game, config.preset, "ppo", config.seed)
+    out = args.out or run_dir(DEFAULT_ROOT, config.game, config.preset, "ppo", config.seed)
     if not args.resume and (out / "checkpoint.pkl").exists():
         raise ValueError(f"{out} already holds a run: pass --resume to continue it, or another "
                          "--out")
@@ -114,7 +118,7 @@ def cmd_eval(args) -> int:
         if args.game is None or args.preset is None:
             raise ValueError("--random needs --game and --preset")
         game, preset, seed, policy = args.game, args.preset, args.seed or 0, "random"
-        out = args.out or default_run_dir(game, preset, "random", seed)
+        out = args.out or run_dir(DEFAULT_ROOT, game, preset, "random", seed)
         checkpoint = None
     else:
         config = load_checkpoint(args.checkpoint)["config"]

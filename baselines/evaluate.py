@@ -38,9 +38,9 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
     if (policy == "random") != (checkpoint is None):
         raise ValueError("give a checkpoint for the 'sampled' and 'greedy' policies, and none "
                          "for 'random'")
-    for name, value in (("episodes", episodes), ("num_envs", num_envs)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise ValueError(f"{name} must be an int >= 1, got {value!r}")
+    from stori_jax.env import _check_int
+
+    episodes, num_envs = _check_int("episodes", episodes, 1), _check_int("num_envs", num_envs, 1)
     eval_seed = seed + EVAL_SEED_OFFSET if eval_seed is None else eval_seed
     num_envs = min(num_envs, episodes)
     if checkpoint is not None:

@@ -26,7 +26,9 @@ EVIDENCE_HYPERPARAMETERS = dict(network="nips", update_epochs=2, num_minibatches
 
 
 def run_dir(game: str, preset: str, agent: str, seed: int) -> Path:
-    return RESULTS / "runs" / f"{game}-{preset}" / f"{agent}-seed{seed}"
+    from baselines.commands import run_dir as layout
+
+    return layout(RESULTS / "runs", game, preset, agent, seed)
 
 
 def stage_train() -> None:

@@ -102,8 +102,10 @@ def aggregate(evaluations: list[dict], ppo_policy: str = "sampled") -> list[dict
 
 
 def _order(game: str, preset: str):
-    games = ["Breakout", "Boxing", "Gopher", "BankHeist"]
-    return (games.index(game) if game in games else len(games), game, preset)
+    from stori_jax import STORI_GAMES
+
+    rank = STORI_GAMES.index(game) if game in STORI_GAMES else len(STORI_GAMES)
+    return (rank, game, preset)
 
 
 def _cell(entry) -> str:
