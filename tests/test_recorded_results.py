@@ -10,8 +10,9 @@ from pathlib import Path
 
 import pytest
 
+from baselines.run_evidence import RESULTS as BASELINE_RESULTS
+
 ROOT = Path(__file__).resolve().parents[1]
-BASELINE_RESULTS = ROOT / "baselines" / "results"
 BENCHMARK_RESULTS = ROOT / "benchmarks" / "results"
 PPO_FILES = ("config.json", "log.csv", "episodes.csv", "summary.json", "eval-sampled.json")
 
@@ -35,14 +36,14 @@ def test_every_evidence_run_is_recorded(game, preset, seed):
 @pytest.mark.parametrize("game, preset, seed", evidence_runs())
 def test_every_evidence_run_used_the_recorded_hyperparameters(game, preset, seed):
     from baselines.ppo import PPOConfig
-    from baselines.run_evidence import GAME_HYPERPARAMETERS, run_dir
+    from baselines.run_evidence import EVAL_EPISODES, GAME_HYPERPARAMETERS, run_dir
 
     recorded = json.loads((run_dir(game, preset, "ppo", seed) / "config.json").read_text())
     expected = PPOConfig(game=game, preset=preset, seed=seed, **GAME_HYPERPARAMETERS[game])
     assert recorded == dataclasses.asdict(expected)
     evaluation = json.loads((run_dir(game, preset, "ppo", seed) / "eval-sampled.json").read_text())
     assert (evaluation["game"], evaluation["preset"], evaluation["train_seed"],
-            evaluation["episodes"]) == (game, preset, seed, 100)
+            evaluation["episodes"]) == (game, preset, seed, EVAL_EPISODES)
 
 
 def test_the_committed_table_is_what_the_recorded_evaluations_give():
