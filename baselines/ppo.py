@@ -59,6 +59,7 @@ class PPOConfig:
     vf_coef: float = 0.5
     max_grad_norm: float = 0.5
     network: str = "nature"       # "nature" (Mnih 2015), "nips" (Mnih 2013, 3x cheaper), "tiny"
+    augment_shift: int = 0        # DrQ/RAD random shifts of up to this many pixels in the update
     checkpoint_every: int = 10    # iterations between checkpoints (and always at the end)
 
     @property
@@ -79,8 +80,9 @@ class PPOConfig:
 
         stori_jax.preset(self.game, self.preset)  # unknown game or preset: a clear ValueError
         for name in ("seed", "total_steps", "num_envs", "num_steps", "num_minibatches",
-                     "update_epochs", "checkpoint_every"):
-            value, minimum = getattr(self, name), 0 if name == "seed" else 1
+                     "update_epochs", "checkpoint_every", "augment_shift"):
+            value = getattr(self, name)
+            minimum = 0 if name in ("seed", "augment_shift") else 1
             if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
                 raise ValueError(f"{name} must be an int >= {minimum}, got {value!r}")
         if self.num_envs % 2:
@@ -284,6 +286,17 @@ def gae(rollout: Rollout, last_value, gamma: float, lam: float):
     return advantages, advantages + rollout.value
 
 
+def random_shift(obs: jax.Array, key, pad: int) -> jax.Array:
+    """DrQ's image augmentation: each (H, W, C) frame stack of the batch padded by ``pad``
+    pixels (edges repeated) and cropped back to (H, W) at its own random offset, so the whole
+    stack moves by up to ``pad`` pixels in each direction."""
+    n, h, w, c = obs.shape
+    padded = jnp.pad(obs, ((0, 0), (pad, pad), (pad, pad), (0, 0)), mode="edge")
+    offsets = jax.random.randint(key, (n, 2), 0, 2 * pad + 1)
+    return jax.vmap(lambda frame, at: jax.lax.dynamic_slice(frame, (at[0], at[1], 0), (h, w, c)))(
+        padded, offsets)
+
+
 def ppo_loss(network, config: PPOConfig, params, batch):
     obs, action, old_logp, old_value, advantage, target = batch
     logits, value = network.apply(params, obs)
@@ -312,8 +325,11 @@ def make_update(network, optimizer, config: PPOConfig):
     """The whole PPO update of one iteration, jitted: GAE, then epochs x minibatches of SGD."""
     grad_fn = jax.value_and_grad(lambda p, b: ppo_loss(network, config, p, b), has_aux=True)
 
-    def minibatch_step(carry, batch):
+    def minibatch_step(carry, batch_and_key):
         params, opt_state = carry
+        batch, key = batch_and_key
+        if config.augment_shift:  # the update sees shifted frames (RAD); acting never does
+            batch = (random_shift(batch[0], key, config.augment_shift), *batch[1:])
         (loss, metrics), grads = grad_fn(params, batch)
         updates, opt_state = optimizer.update(grads, opt_state, params)
         return (optax.apply_updates(params, updates), opt_state), dict(metrics, loss=loss)
@@ -324,8 +340,9 @@ def make_update(network, optimizer, config: PPOConfig):
         shuffled = jax.tree.map(
             lambda x: x[order].reshape(config.num_minibatches, config.minibatch_size,
                                        *x.shape[1:]), flat)
+        shift_keys = jax.random.split(jax.random.fold_in(key, 1), config.num_minibatches)
         (params, opt_state), metrics = jax.lax.scan(minibatch_step, (params, opt_state),
-                                                    shuffled)
+                                                    (shuffled, shift_keys))
         return (params, opt_state, flat), metrics
 
     @jax.jit
@@ -407,7 +424,8 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
         update = make_update(network, optimizer, config)
         if resume:
             ckpt = load_checkpoint(ckpt_path)
-            if ckpt["config"] != dataclasses.asdict(config):
+            # a checkpoint from before a field existed was trained with its default
+            if dataclasses.asdict(PPOConfig(**ckpt["config"])) != dataclasses.asdict(config):
                 raise ValueError(f"--resume: {ckpt_path} was trained with a different config:"
                                  f"\n  checkpoint: {ckpt['config']}\n  now: "
                                  f"{dataclasses.asdict(config)}")

@@ -64,8 +64,9 @@ def synthetic_rollout(config, network, params, seed=0):
     return ppo.Rollout(obs, action, logp, value, reward, done)
 
 
-def test_an_update_lowers_the_loss_on_a_fixed_batch():
-    config = tiny(learning_rate=1e-3, update_epochs=4)
+@pytest.mark.parametrize("augment_shift", [0, 4])
+def test_an_update_lowers_the_loss_on_a_fixed_batch(augment_shift):
+    config = tiny(learning_rate=1e-3, update_epochs=4, augment_shift=augment_shift)
     network = ppo.make_network(config, 4)
     params = network.init(jax.random.PRNGKey(0), jnp.zeros((1, 84, 84, 4), jnp.uint8))
     optimizer = ppo.make_optimizer(config)
@@ -83,6 +84,28 @@ def test_an_update_lowers_the_loss_on_a_fixed_batch():
     after, _ = ppo.ppo_loss(network, config, new_params, flat)
     assert float(after) < float(before) - 1e-3, (before, after)
     assert 0 <= float(metrics["clipfrac"]) <= 1 and np.isfinite(float(metrics["approx_kl"]))
+
+
+def test_random_shift_crops_the_edge_padded_frames_at_offsets_within_the_pad():
+    pad = 3
+    obs = jax.random.randint(jax.random.PRNGKey(0), (32, 84, 84, 4), 0, 256).astype(jnp.uint8)
+    shifted = np.asarray(ppo.random_shift(obs, jax.random.PRNGKey(1), pad))
+    assert shifted.shape == obs.shape and shifted.dtype == np.uint8
+    padded = np.pad(np.asarray(obs), ((0, 0), (pad, pad), (pad, pad), (0, 0)), mode="edge")
+    offsets = []
+    for frame, out in zip(padded, shifted):
+        found = [(i, j) for i in range(2 * pad + 1) for j in range(2 * pad + 1)
+                 if np.array_equal(frame[i:i + 84, j:j + 84], out)]
+        assert len(found) == 1, "every output is one crop of its own padded frame stack"
+        offsets.append(found[0])
+    assert len(set(offsets)) > 10, "each sample draws its own offset"
+    np.testing.assert_array_equal(ppo.random_shift(obs, jax.random.PRNGKey(1), pad), shifted)
+    np.testing.assert_array_equal(ppo.random_shift(obs, jax.random.PRNGKey(1), 0), obs)
+
+
+def test_augment_shift_must_be_a_non_negative_int():
+    with pytest.raises(ValueError, match="augment_shift must be an int >= 0"):
+        tiny(augment_shift=-1)
 
 
 def test_gae_by_hand():
