@@ -4,6 +4,7 @@ and Boxing under 3.1 and two perturbed presets each, then the paper's evaluation
 table.  Runs already finished are skipped, so the script can be stopped and started again.
 
     python baselines/run_evidence.py [--stage train|eval|table|all] [--only Boxing-3.1 ...]
+                                     [--seeds 0 7 13]
 """
 
 from __future__ import annotations
@@ -38,10 +39,10 @@ def run_dir(game: str, preset: str, agent: str, seed: int) -> Path:
     return layout(RESULTS / "runs", game, preset, agent, seed)
 
 
-def stage_train(runs=RUNS) -> None:
+def stage_train(runs=RUNS, seeds=SEEDS) -> None:
     from baselines.ppo import PPOConfig, env_only_sps, train
 
-    for seed in SEEDS:
+    for seed in seeds:
         for game, preset in runs:
             out = run_dir(game, preset, "ppo", seed)
             if (out / "summary.json").exists():
@@ -60,11 +61,11 @@ def stage_train(runs=RUNS) -> None:
 EVAL_EPISODES, EVAL_ENVS = 100, 20
 
 
-def stage_eval(runs=RUNS) -> None:
+def stage_eval(runs=RUNS, seeds=SEEDS) -> None:
     """Sampled-policy evaluation of every PPO run, and the random policy, same protocol."""
     from baselines.evaluate import evaluate, write_result
 
-    for seed in SEEDS:
+    for seed in seeds:
         for game, preset in runs:
             jobs = [("ppo", "sampled", run_dir(game, preset, "ppo", seed) / "checkpoint.pkl"),
                     ("random", "random", None)]
@@ -115,6 +116,8 @@ def main() -> None:
     parser.add_argument("--stage", default="all", choices=["train", "eval", "table", "all"])
     parser.add_argument("--only", nargs="+", metavar="GAME-PRESET",
                         help="train and evaluate only these runs, e.g. Boxing-3.1 (default: all)")
+    parser.add_argument("--seeds", nargs="+", type=int, choices=SEEDS, default=SEEDS,
+                        help="train and evaluate only these seeds (default: all)")
     args = parser.parse_args()
     names = {f"{game}-{preset}": (game, preset) for game, preset in RUNS}
     unknown = sorted(set(args.only or ()) - set(names))
@@ -122,9 +125,9 @@ def main() -> None:
         parser.error(f"--only: unknown runs {unknown}; the runs are {list(names)}")
     runs = [names[n] for n in args.only] if args.only else RUNS
     if args.stage in ("train", "all"):
-        stage_train(runs)
+        stage_train(runs, args.seeds)
     if args.stage in ("eval", "all"):
-        stage_eval(runs)
+        stage_eval(runs, args.seeds)
     if args.stage in ("table", "all"):
         stage_table()
 
