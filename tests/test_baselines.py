@@ -301,6 +301,19 @@ def test_cli_errors_are_clear(argv, match, capsys):
     assert match in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("argv, match", [
+    (["--seeds", "5"], "invalid choice: 5"),
+    (["--only", "Pong-3.1"], "unknown runs ['Pong-3.1']"),
+])
+def test_run_evidence_names_bad_runs_and_seeds(argv, match, monkeypatch, capsys):
+    from baselines import run_evidence
+
+    monkeypatch.setattr("sys.argv", ["run_evidence.py", "--stage", "table", *argv])
+    with pytest.raises(SystemExit) as exit_info:
+        run_evidence.main()
+    assert exit_info.value.code == 2 and match in capsys.readouterr().err
+
+
 def test_cli_train_refuses_to_overwrite_and_evaluates(uninterrupted, tmp_path, capsys):
     full, _ = uninterrupted
     assert main(["train", "ppo", "--game", "Breakout", "--out", str(full), "--quiet"]) == 2
