@@ -101,6 +101,15 @@ class PPOConfig:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
 
     @classmethod
+    def from_recorded(cls, recorded: dict) -> "PPOConfig":
+        """The config a run recorded (config.json, a checkpoint).  A field added since the run
+        was recorded takes its default, which is what the run was trained with."""
+        unknown = sorted(set(recorded) - {f.name for f in dataclasses.fields(cls)})
+        if unknown:
+            raise ValueError(f"recorded PPO config has unknown fields {unknown}")
+        return cls(**recorded)
+
+    @classmethod
     def from_overrides(cls, base: "PPOConfig", overrides: dict[str, str]) -> "PPOConfig":
         """``base`` with ``field=value`` strings from the command line, typed by the field."""
         fields = {f.name: f for f in dataclasses.fields(cls)}
@@ -424,8 +433,7 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
         update = make_update(network, optimizer, config)
         if resume:
             ckpt = load_checkpoint(ckpt_path)
-            # a checkpoint from before a field existed was trained with its default
-            if dataclasses.asdict(PPOConfig(**ckpt["config"])) != dataclasses.asdict(config):
+            if PPOConfig.from_recorded(ckpt["config"]) != config:
                 raise ValueError(f"--resume: {ckpt_path} was trained with a different config:"
                                  f"\n  checkpoint: {ckpt['config']}\n  now: "
                                  f"{dataclasses.asdict(config)}")
@@ -531,7 +539,7 @@ def load_policy(checkpoint: Path, mode: str = "sampled"):
     if mode not in ("sampled", "greedy"):
         raise ValueError(f"mode must be 'sampled' or 'greedy', got {mode!r}")
     ckpt = load_checkpoint(checkpoint)
-    config = PPOConfig(**ckpt["config"])
+    config = PPOConfig.from_recorded(ckpt["config"])
     import stori_jax
 
     network = make_network(config, stori_jax.get_game(config.game).num_actions)
