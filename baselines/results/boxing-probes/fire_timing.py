@@ -5,16 +5,21 @@ sum of those differences weighted by (gamma * lambda)^k for the updates in this 
     python baselines/results/boxing-probes/fire_timing.py   # ~1 min on 2 cores
 """
 
+import ale_py
 import jax.numpy as jnp
 import numpy as np
 
 import stori_jax
+from baselines.ppo import PPOConfig
 
 NUM_ENVS, STEPS, LAGS = 16, 4000, 16
-FIRE_ACTIONS = [1] + list(range(10, 18))  # FIRE and the eight direction+FIRE actions
+# Boxing plays ALE's full action set, so an action's index is its ale_py.Action value.
+NUM_ACTIONS = stori_jax.get_game("Boxing").num_actions
+FIRE_ACTIONS = [a.value for a in ale_py.Action.__members__.values() if "FIRE" in a.name]
+EVIDENCE = PPOConfig(game="Boxing", preset="3.1")  # gamma and gae_lambda of the evidence
 
 rng = np.random.default_rng(0)
-actions = rng.integers(18, size=(STEPS, NUM_ENVS))
+actions = rng.integers(NUM_ACTIONS, size=(STEPS, NUM_ENVS))
 rewards = np.zeros((STEPS, NUM_ENVS))
 with stori_jax.make("Boxing", "3.1", num_envs=NUM_ENVS, seed=3, obs="atari84") as env:
     env.reset()
@@ -27,6 +32,6 @@ for k in range(LAGS):
     hit = rewards[k:] > 0
     diffs.append(hit[fire[:STEPS - k]].mean() - hit[~fire[:STEPS - k]].mean())
     print(f"k={k:2d}  {diffs[-1]:+.4f}")
-for gamma_lambda in (0.99 * 0.95, 0.95 * 0.9):
+for gamma_lambda in (EVIDENCE.gamma * EVIDENCE.gae_lambda, 0.95 * 0.9):  # 0.95, 0.9: a probe
     print(f"sum of (gamma*lambda)^k x difference, gamma*lambda={gamma_lambda:.3f}: "
           f"{sum(gamma_lambda ** k * d for k, d in enumerate(diffs)):+.4f}")
