@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 from typing import NamedTuple
 
+import ale_py
 import flax.linen as nn
 import jax
 import jax.numpy as jnp
@@ -27,6 +28,7 @@ import numpy as np
 import optax
 
 NETWORKS = ("nature", "nips", "tiny")
+ACTION_HEADS = ("joint", "factored")
 LOG_FIELDS = ("iteration", "global_step", "episodes", "mean_return", "mean_length", "pg_loss",
               "v_loss", "entropy", "approx_kl", "clipfrac", "explained_variance", "lr", "sps",
               "rollout_sps", "update_s")
@@ -60,6 +62,8 @@ class PPOConfig:
     max_grad_norm: float = 0.5
     network: str = "nature"       # "nature" (Mnih 2015), "nips" (Mnih 2013, 3x cheaper), "tiny"
     augment_shift: int = 0        # DrQ/RAD random shifts of up to this many pixels in the update
+    action_head: str = "joint"    # "joint": one softmax over the actions; "factored": a
+                                  # direction softmax times a fire softmax (ALE's full 18 actions)
     checkpoint_every: int = 10    # iterations between checkpoints (and always at the end)
 
     @property
@@ -93,6 +97,14 @@ class PPOConfig:
                              f"num_minibatches ({self.num_minibatches})")
         if self.network not in NETWORKS:
             raise ValueError(f"network must be one of {list(NETWORKS)}, got {self.network!r}")
+        if self.action_head not in ACTION_HEADS:
+            raise ValueError(f"action_head must be one of {list(ACTION_HEADS)}, "
+                             f"got {self.action_head!r}")
+        num_actions = stori_jax.get_game(self.game).num_actions
+        if self.action_head == "factored" and num_actions != len(FULL_ACTION_SET):
+            raise ValueError(f"action_head='factored' needs a game that plays ALE's full "
+                             f"{len(FULL_ACTION_SET)} actions (e.g. Boxing, BankHeist); "
+                             f"{self.game} has {num_actions}: use action_head='joint'")
         for name in ("gamma", "gae_lambda"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
@@ -171,11 +183,30 @@ TORSOS = {  # (features, kernel, stride) per conv layer, then the dense layer's 
 }
 
 
+FULL_ACTION_SET = [a.name for a in sorted(ale_py.Action.__members__.values(),
+                                            key=lambda a: a.value)]
+
+
+def direction_and_fire(names: list[str]) -> np.ndarray:
+    """(A, 2) int32: each action as (its direction's index, 1 if it fires).  ALE's full set is
+    every one of 9 directions (NOOP, UP, RIGHT, ..., DOWNLEFT) with and without FIRE."""
+    directions = [name.replace("FIRE", "") or "NOOP" for name in names]
+    order = list(dict.fromkeys(directions))
+    return np.array([(order.index(d), "FIRE" in name) for d, name in zip(directions, names)],
+                    np.int32)
+
+
 class ActorCritic(nn.Module):
-    """Atari CNN torso on (B, 84, 84, 4) uint8 frames; policy logits and a value."""
+    """Atari CNN torso on (B, 84, 84, 4) uint8 frames; policy logits and a value.
+
+    ``action_head="factored"`` (ALE's full action set only) makes the policy a product of a
+    direction distribution and a fire distribution: its logits are the normalised log-probs
+    log p(direction) + log p(fire), so every sample teaches the fire head whatever its direction.
+    """
 
     num_actions: int
     network: str = "nature"
+    action_head: str = "joint"
 
     @nn.compact
     def __call__(self, obs):
@@ -185,7 +216,17 @@ class ActorCritic(nn.Module):
             x = nn.relu(Conv(features, kernel, stride)(x))
         x = x.reshape(x.shape[0], -1)
         x = nn.relu(nn.Dense(width, kernel_init=nn.initializers.orthogonal(np.sqrt(2)))(x))
-        logits = nn.Dense(self.num_actions, kernel_init=nn.initializers.orthogonal(0.01))(x)
+
+        def head(size):
+            return nn.Dense(size, kernel_init=nn.initializers.orthogonal(0.01))(x)
+
+        if self.action_head == "joint":
+            logits = head(self.num_actions)
+        else:
+            table = direction_and_fire(FULL_ACTION_SET)
+            direction = jax.nn.log_softmax(head(int(table[:, 0].max()) + 1))
+            fire = jax.nn.log_softmax(head(2))
+            logits = direction[:, table[:, 0]] + fire[:, table[:, 1]]
         value = nn.Dense(1, kernel_init=nn.initializers.orthogonal(1.0))(x)
         return logits, value[:, 0]
 
@@ -193,7 +234,8 @@ class ActorCritic(nn.Module):
 # -- acting ---------------------------------------------------------------------------------------
 
 def make_network(config: PPOConfig, num_actions: int) -> ActorCritic:
-    return ActorCritic(num_actions=num_actions, network=config.network)
+    return ActorCritic(num_actions=num_actions, network=config.network,
+                       action_head=config.action_head)
 
 
 def make_optimizer(config: PPOConfig) -> optax.GradientTransformation:
