@@ -29,6 +29,9 @@ import optax
 
 NETWORKS = ("nature", "nips", "tiny")
 ACTION_HEADS = ("joint", "factored")
+# ALE's full action set by name, in index order (games whose minimal set is all 18 use it as is)
+FULL_ACTION_SET = [a.name for a in sorted(ale_py.Action.__members__.values(),
+                                            key=lambda a: a.value)]
 LOG_FIELDS = ("iteration", "global_step", "episodes", "mean_return", "mean_length", "pg_loss",
               "v_loss", "entropy", "approx_kl", "clipfrac", "explained_variance", "lr", "sps",
               "rollout_sps", "update_s")
@@ -181,10 +184,6 @@ TORSOS = {  # (features, kernel, stride) per conv layer, then the dense layer's 
     "nips": ([(16, 8, 4), (32, 4, 2)], 256),
     "tiny": ([(8, 8, 4)], 32),
 }
-
-
-FULL_ACTION_SET = [a.name for a in sorted(ale_py.Action.__members__.values(),
-                                            key=lambda a: a.value)]
 
 
 def direction_and_fire(names: list[str]) -> np.ndarray:
