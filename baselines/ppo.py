@@ -195,6 +195,10 @@ def direction_and_fire(names: list[str]) -> np.ndarray:
                     np.int32)
 
 
+DIRECTION_AND_FIRE = direction_and_fire(FULL_ACTION_SET)  # the factored head's action table
+NUM_DIRECTIONS = int(DIRECTION_AND_FIRE[:, 0].max()) + 1
+
+
 class ActorCritic(nn.Module):
     """Atari CNN torso on (B, 84, 84, 4) uint8 frames; policy logits and a value.
 
@@ -222,10 +226,9 @@ class ActorCritic(nn.Module):
         if self.action_head == "joint":
             logits = head(self.num_actions)
         else:
-            table = direction_and_fire(FULL_ACTION_SET)
-            direction = jax.nn.log_softmax(head(int(table[:, 0].max()) + 1))
+            direction = jax.nn.log_softmax(head(NUM_DIRECTIONS))
             fire = jax.nn.log_softmax(head(2))
-            logits = direction[:, table[:, 0]] + fire[:, table[:, 1]]
+            logits = direction[:, DIRECTION_AND_FIRE[:, 0]] + fire[:, DIRECTION_AND_FIRE[:, 1]]
         value = nn.Dense(1, kernel_init=nn.initializers.orthogonal(1.0))(x)
         return logits, value[:, 0]
 

@@ -6,18 +6,17 @@ and, by the horizontal gap between the boxers (RAM labels), how often a FIRE lan
     python baselines/results/boxing-probes/fire_timing.py   # ~1 min on 2 cores
 """
 
-import ale_py
 import jax.numpy as jnp
 import numpy as np
 
 import stori_jax
-from baselines.ppo import PPOConfig
+from baselines import ppo
 
 NUM_ENVS, STEPS, LAGS = 16, 4000, 16
 # Boxing plays ALE's full action set, so an action's index is its ale_py.Action value.
 NUM_ACTIONS = stori_jax.get_game("Boxing").num_actions
-FIRE_ACTIONS = [a.value for a in ale_py.Action.__members__.values() if "FIRE" in a.name]
-EVIDENCE = PPOConfig(game="Boxing", preset="3.1")  # gamma and gae_lambda of the evidence
+FIRE_ACTIONS = np.flatnonzero(ppo.DIRECTION_AND_FIRE[:, 1])
+EVIDENCE = ppo.PPOConfig(game="Boxing", preset="3.1")  # gamma and gae_lambda of the evidence
 
 rng = np.random.default_rng(0)
 actions = rng.integers(NUM_ACTIONS, size=(STEPS, NUM_ENVS))
