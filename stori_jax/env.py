@@ -86,8 +86,11 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
         raise ValueError(f"obs must be one of {list(OBS_KINDS)}, got {obs!r}")
     if cfg.ram_observation and obs != "ram":
         raise ValueError(f"type 0 (ram_observation) observes the RAM: obs must be 'ram', got {obs!r}")
-    if obs == "ram" and cfg.observation is not None:
-        raise ValueError("obs='ram' cannot show an observation mask (type 3.2); use a screen obs")
+    if obs == "ram" and any(name == "observation" for name, _, _ in cfg.components()):
+        where = "Config.observation" if cfg.observation is not None \
+            else "Config.drift.secondary.observation"
+        raise ValueError(f"obs='ram' cannot show an observation mask (type 3.2, {where}); "
+                         "use a screen obs")
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
     plan = compile_plan(cfg, spec, num_envs=num_envs, frame_skip=frame_skip, obs=obs,

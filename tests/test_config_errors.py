@@ -196,12 +196,36 @@ def test_part_in_both_places():
         Config(action_noise=ActionNoise(0.1), drift=ConceptDrift("sudden", 5, SECONDARY_OK))
 
 
+def test_secondary_settings_that_would_be_ignored():
+    """Concept 2 cannot carry its own granularity or another game: nothing is silently dropped."""
+    with pytest.raises(ValueError, match=r"Config\.drift\.secondary\.granularity 'step' is not "
+                                         r"used: .* Config\.granularity \('frame'\)"):
+        Config(drift=ConceptDrift("sudden", 5, Config(event=RandomEvent(1, 0.1),
+                                                      granularity="step")))
+    same = Config(drift=ConceptDrift("sudden", 5, Config(event=RandomEvent(1, 0.1),
+                                                         granularity="step")), granularity="step")
+    assert same.granularity == "step"
+    boxing_secondary = Config(action_noise=ActionNoise(0.3), game="Boxing")
+    with pytest.raises(ValueError, match=r"Config\.drift\.secondary is bound to game 'Boxing' "
+                                         r"but Config\.game is 'BankHeist'"):
+        Config(drift=ConceptDrift("sudden", 5, boxing_secondary), game="BankHeist")
+    unbound = Config(drift=ConceptDrift("sudden", 5, boxing_secondary))
+    with pytest.raises(ValueError, match=r"bound to game 'Boxing' but Config\.game is 'Gopher'"):
+        unbound.for_game("Gopher")
+    assert unbound.for_game("boxing").game == "boxing"
+
+
 # -- type 0, config fields ---------------------------------------------------------------------
 
 def test_type0_with_a_mask():
     with pytest.raises(ValueError, match=r"Config\.ram_observation \(type 0\) .* cannot be "
                                          r"combined with an observation mask \(type 3\.2\)"):
         Config(ram_observation=True, observation=ObservationMask("crop", 1))
+    drifted_mask = ConceptDrift("sudden", 1, Config(observation=ObservationMask("blackout", 6)))
+    with pytest.raises(ValueError, match=r"Config\.ram_observation \(type 0\) .* cannot be "
+                                         r"combined with an observation mask \(type 3\.2\) in "
+                                         r"drift\.secondary"):
+        Config(ram_observation=True, drift=drifted_mask)
     assert Config(ram_observation=True).type == "0"
     with pytest.raises(ValueError, match=r"Config\.ram_observation must be True or False"):
         Config(ram_observation=1)

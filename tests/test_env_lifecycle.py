@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import stori_jax
-from stori_jax import Config, ObservationMask
+from stori_jax import Config, ConceptDrift, ObservationMask
 
 from _env_support import make, process_gone
 
@@ -277,7 +277,11 @@ def test_step_before_reset_and_send_recv_misuse():
     (dict(game="Breakout", config=Config(ram_observation=True), obs="raw"),
      r"type 0.*obs must be 'ram'"),
     (dict(game="Breakout", config=Config(observation=ObservationMask("blackout", 1)), obs="ram"),
-     r"obs='ram' cannot show an observation mask"),
+     r"obs='ram' cannot show an observation mask \(type 3\.2, Config\.observation\)"),
+    (dict(game="Gopher", obs="ram", config=Config(drift=ConceptDrift(
+        "sudden", 1, Config(observation=ObservationMask("blackout", 6))))),
+     r"obs='ram' cannot show an observation mask \(type 3\.2, "
+     r"Config\.drift\.secondary\.observation\)"),
     (dict(game="Breakout", config=Config(observation=ObservationMask("blackout", 12))),
      r"blackout modes: allowed \[1, 2, .*11\]"),
     (dict(game="Boxing", config=Config(game="Breakout")), r"bound to game 'Breakout'"),
