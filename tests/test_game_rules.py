@@ -301,6 +301,9 @@ def test_breakout_labels():
     L = breakout.LABELS
     assert (L["ball_x"](ram), L["ball_y"](ram), L["player_x"](ram), L["score"](ram)) == (
         11, 22, 33, 123)
+    bitmap = make_ram({a: 100 + a for a in range(36)}).astype(np.int32)
+    assert [int(L[f"block_bitmap_{a}"](bitmap)) for a in range(36)] == list(range(100, 136))
+    assert sum(name.startswith("block_bitmap_") for name in L) == 36
 
 
 # ---------------------------------------------------------------------------------------------
@@ -442,7 +445,17 @@ def test_gopher_labels():
     ram = make_ram({31: 83, 48: 0x01, 49: 0x23, 50: 0x45, 52: 0b1101, 92: 128, 95: 60})
     L = gopher.LABELS
     got = {k: int(f(ram.astype(np.int32))) for k, f in L.items()}
-    assert got == {"farmer_x": 83, "score": 12345, "carrots": 0b101, "seed_x": 60, "seed_y": 128}
+    named = {k: v for k, v in got.items()
+             if not k.startswith(("underground_row", "duck_"))}
+    assert named == {"farmer_x": 83, "score": 12345, "carrots": 0b101, "seed_x": 60, "seed_y": 128}
+    # the underground rows (top to bottom: RAM 0..5, 6..11, 12..17, 18..23) and the duck's bytes
+    bytes_ = make_ram({**{a: 100 + a for a in range(24)},
+                       **{a: 200 + a % 50 for a in (25, 26, 27, 28, 94)}}).astype(np.int32)
+    got = {k: int(f(bytes_)) for k, f in L.items()}
+    assert [got[f"underground_row{r}_{k}"] for r in range(4) for k in range(6)] == list(
+        range(100, 124))
+    assert [got[f"duck_{a}"] for a in (25, 26, 27, 28, 94)] == [225, 226, 227, 228, 244]
+    assert len(got) == 5 + 24 + 5
 
 
 # ---------------------------------------------------------------------------------------------

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from stori_jax.games.base import (EventOutcome, EventRule, GameSpec, NO_EVENT, RamObsMode, Region,
-                                  blackout_table, pick)
+                                  blackout_table, byte_labels, pick)
 
 CITY = 0  # counts cities 0..10+ during play; the maze is CITY % 4
 ROBBER_Y, ROBBER_X = 8, 28  # x 12..140
@@ -111,9 +111,9 @@ LABELS = {
     "bomb": lambda ram: ram[..., BOMB],
     "direction": lambda ram: ram[..., DIRECTION],
     "orientation": lambda ram: ram[..., ORIENTATION],
-    **{f"slot_{k}": (lambda a: lambda ram: ram[..., a])(a) for k, a in enumerate(SLOTS)},
-    **{f"police_orientation_{k}": (lambda a: lambda ram: ram[..., a])(a)
-       for k, a in enumerate(POLICE_ORIENTATION)},
+    **byte_labels([f"slot_{k}" for k in range(len(SLOTS))], SLOTS),
+    **byte_labels([f"police_orientation_{k}" for k in range(len(POLICE_ORIENTATION))],
+                  POLICE_ORIENTATION),
     "lives": lambda ram: ram[..., LIVES],
     "fuel": lambda ram: ram[..., FUEL],
     "background_colour": lambda ram: ram[..., BACKGROUND_COLOUR],

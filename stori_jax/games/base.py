@@ -146,6 +146,11 @@ def bcd(value):
     return (value >> 4) * 10 + (value & 15)
 
 
+def byte_labels(names, addresses) -> dict[str, Callable]:
+    """{name: ram -> ram[..., address]}: type-0 labels that are single RAM bytes."""
+    return {name: (lambda a: lambda ram: ram[..., a])(int(a)) for name, a in zip(names, addresses)}
+
+
 def full_width(y0: int, y1: int, fill=BLACK) -> Region:
     return Region(0, SCREEN_WIDTH - 1, y0, y1, fill)
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from stori_jax.games.base import (EventOutcome, EventRule, GameSpec, NO_EVENT, RamObsMode, Region,
-                                  bcd, blackout_table, changed, pick)
+                                  bcd, blackout_table, byte_labels, changed, pick)
 
 BLOCK_RAM = np.arange(0, 36)  # block bitmap: 6 columns of 6 bytes
 BALL_X, BALL_Y, PLAYER_X = 99, 101, 72
@@ -79,6 +79,7 @@ LABELS = {
     "ball_y": lambda ram: ram[..., BALL_Y],
     "player_x": lambda ram: ram[..., PLAYER_X],
     "score": lambda ram: 100 * bcd(ram[..., SCORE_HUNDREDS]) + bcd(ram[..., SCORE_TENS_UNITS]),
+    **byte_labels([f"block_bitmap_{a}" for a in BLOCK_RAM], BLOCK_RAM),
 }
 
 GAME = GameSpec(name="Breakout", rom_id="breakout", num_actions=4, regions=REGIONS,

@@ -6,9 +6,10 @@ from __future__ import annotations
 import numpy as np
 
 from stori_jax.games.base import (EventOutcome, EventRule, GameSpec, NO_EVENT, RamObsMode, Region,
-                                  bcd, blackout_table, full_width, pick)
+                                  bcd, blackout_table, byte_labels, full_width, pick)
 
 UNDERGROUND_RAM = np.arange(0, 24)  # rows 0..5, 6..11, 12..17, 18..23 (top to bottom); 1 = tunnel
+DUCK_RAM = (25, 26, 27, 28, 94)
 FARMER_X = 31  # 19 left .. 83 middle .. 148 right
 SCORE_HIGH, SCORE_MIDDLE, SCORE_LOW = 48, 49, 50  # BCD, two digits each
 CARROTS = 52  # bit 2 left, bit 1 middle, bit 0 right
@@ -119,6 +120,8 @@ LABELS = {
     "carrots": lambda ram: ram[..., CARROTS] & 7,
     "seed_x": lambda ram: ram[..., SEED_X],
     "seed_y": lambda ram: ram[..., SEED_Y],
+    **byte_labels([f"underground_row{a // 6}_{a % 6}" for a in UNDERGROUND_RAM], UNDERGROUND_RAM),
+    **byte_labels([f"duck_{a}" for a in DUCK_RAM], DUCK_RAM),
 }
 
 GAME = GameSpec(name="Gopher", rom_id="gopher", num_actions=8, regions=REGIONS,
