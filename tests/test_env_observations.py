@@ -12,9 +12,12 @@ import functools
 import numpy as np
 import pytest
 
+import stori_jax
 from stori_jax import Config, ObservationMask, get_game
+from stori_jax.env import emulator_seeds
 
-from _env_support import binomial_ok, breakout_tracker, make, random_actions, run_env, run_lockstep
+from _env_support import (binomial_ok, breakout_tracker, make, new_ale, random_actions, run_env,
+                          run_lockstep)
 
 STEPS = 30
 BOXING_RING = (110, 156, 66)
@@ -92,6 +95,50 @@ def test_ram_obs_mode_changes_the_observation_only(game, mode):
         assert masked.all(), "p = 1: every observation is rendered from the modified RAM"
     if masked.any():
         assert differs[masked].mean() > 0.5, "the rendered screens should differ from the twin's"
+
+
+# the bytes each mode writes, from STORI_SPEC sections 5-8 (not from the library's tables)
+SPEC_RAM_WRITES = {
+    ("Breakout", 2): lambda ram: {99: 0, 101: 0},
+    ("Boxing", 2): lambda ram: {2: 214},
+    ("Gopher", 1): lambda ram: {52: int(ram[52]) & ~0b100},
+    ("BankHeist", 4): lambda ram: {69: {0: 30, 1: 190, 2: 46, 3: 126}[int(ram[0]) % 4]},
+}
+
+
+@pytest.mark.parametrize("game,mode", list(SPEC_RAM_WRITES))
+def test_ram_obs_mode_shows_the_next_noop_frame_of_the_written_ram(game, mode):
+    """STORI_SPEC 4.2 on a bare ale-py emulator beside the env: save the state, write the mode's
+    bytes, run one NOOP frame, take that screen, restore. Every observation must be that screen,
+    pixel for pixel (one env, frame_skip 1, p = 1, 80 random steps)."""
+    seed, steps = 5, 80
+    env = stori_jax.make(game, config=Config(observation=ObservationMask("ram", mode, 1.0)),
+                         obs="raw", num_envs=1, seed=seed, frame_skip=1, num_workers=1,
+                         inline_envs=0)
+    ale = new_ale(get_game(game).rom_id, emulator_seeds(seed, 1)[0])
+    actions = ale.getMinimalActionSet()
+    writes = SPEC_RAM_WRITES[game, mode]
+
+    def rendered():
+        state, ram = ale.cloneState(), ale.getRAM()
+        for address, value in writes(ram).items():
+            ale.setRAM(address, value)
+        ale.act(actions[0])
+        screen = ale.getScreenRGB().copy()
+        ale.restoreState(state)
+        return screen
+
+    try:
+        obs, _ = env.reset()
+        ale.reset_game()
+        np.testing.assert_array_equal(np.asarray(obs)[0], rendered(), err_msg="reset")
+        for t, a in enumerate(random_actions(len(actions), steps, 1, seed=3)[:, 0]):
+            obs, *_ = env.step(np.array([a], np.int32))
+            ale.act(actions[a])
+            assert not ale.game_over()
+            np.testing.assert_array_equal(np.asarray(obs)[0], rendered(), err_msg=f"step {t}")
+    finally:
+        env.close()
 
 
 def test_ram_obs_mode_renders_the_first_observation_after_an_autoreset():
