@@ -192,7 +192,10 @@ def after_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, ne
         "reset_step": reset_step,
     }
     episode_step = jnp.where(new_episode, 0, state.episode_step + 1)
-    new_state = state._replace(episode_step=episode_step)
+    # a new episode starts from NOOP (action 0), as after env.reset(): sticky actions never
+    # repeat the last action of the episode before
+    prev_executed = jnp.where(new_episode, 0, state.prev_executed)
+    new_state = state._replace(episode_step=episode_step, prev_executed=prev_executed)
     return (new_state, obs, out.reward + 0, out.terminated != 0, out.truncated != 0, info)
 
 

@@ -111,3 +111,27 @@ def test_sticky_actions_repeat_the_previous_executed_action():
     np.testing.assert_array_equal(flat[fired], previous[fired])
     np.testing.assert_array_equal(flat[~fired], wanted[~fired])
     assert binomial_ok(int(fired.sum()), fired.size, 0.5)
+
+
+def test_sticky_actions_start_every_episode_from_noop():
+    """After an autoreset, as after env.reset(), the previous executed action is NOOP: the first
+    frame of an episode never repeats the last action of the one before (episodes truncated at
+    40 frames = 10 steps; NOOP is action 0)."""
+    steps, episode = 60, 10
+    env = make("Boxing", noise(0.5, sticky=True), max_episode_frames=4 * episode)
+    try:
+        run = run_env(env, np.random.default_rng(36).integers(1, 18, (steps, 2), dtype=np.int32))
+    finally:
+        env.close()
+    np.testing.assert_array_equal(run.stacked("truncated")[:, 0],
+                                  np.arange(steps) % episode == episode - 1)
+    executed, fired = run.stacked("executed_action"), run.stacked("action_corrupted")
+    flat = executed.transpose(1, 0, 2).reshape(2, -1)  # (B, T * frame_skip) frame by frame
+    sticky = fired.transpose(1, 0, 2).reshape(2, -1)
+    starts = np.arange(0, steps, episode) * 4  # the first frame of every episode
+    previous = np.concatenate([np.zeros((2, 1), flat.dtype), flat[:, :-1]], 1)
+    last_of_episode_before = previous[:, starts[1:]].copy()
+    previous[:, starts] = 0
+    np.testing.assert_array_equal(flat[sticky], previous[sticky])
+    # not vacuous: some episodes start sticky where the episode before ended on another action
+    assert (sticky[:, starts[1:]] & (last_of_episode_before != 0)).sum() >= 2
