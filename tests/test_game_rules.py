@@ -304,6 +304,11 @@ def test_breakout_labels():
     bitmap = make_ram({a: 100 + a for a in range(36)}).astype(np.int32)
     assert [int(L[f"block_bitmap_{a}"](bitmap)) for a in range(36)] == list(range(100, 136))
     assert sum(name.startswith("block_bitmap_") for name in L) == 36
+    colours = make_ram({62: 200, 64: 1, 65: 2, 66: 3, 67: 4, 68: 5, 69: 6, 81: 7, 83: 8, 85: 9})
+    colours = colours.astype(np.int32)
+    assert int(L["ball_paddle_colour"](colours)) == 200
+    assert [int(L[f"block_row_colour_{k}"](colours)) for k in range(6)] == [1, 2, 3, 4, 5, 6]
+    assert [int(L[f"score_digit_{k}"](colours)) for k in range(3)] == [7, 8, 9]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -361,11 +366,13 @@ def test_boxing_displace_to_corners():
 
 
 def test_boxing_labels():
-    ram = make_ram({32: 1, 34: 2, 33: 3, 35: 4, 18: 0x42, 19: 0x17, 16: 1, 17: 0x59})
+    ram = make_ram({32: 1, 34: 2, 33: 3, 35: 4, 18: 0x42, 19: 0x17, 16: 1, 17: 0x59,
+                    1: 14, 2: 0, 3: 214, 4: 208})
     L = boxing.LABELS
     got = {k: int(f(ram.astype(np.int32))) for k, f in L.items()}
     assert got == {"player_x": 1, "player_y": 2, "enemy_x": 3, "enemy_y": 4, "player_score": 42,
-                   "enemy_score": 17, "clock_minutes": 1, "clock_seconds": 59}
+                   "enemy_score": 17, "clock_minutes": 1, "clock_seconds": 59,
+                   "player_colour": 14, "enemy_colour": 0, "ring_colour": 214, "clock_colour": 208}
 
 
 # ---------------------------------------------------------------------------------------------

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from stori_jax.games.base import (EventOutcome, EventRule, GameSpec, NO_EVENT, RamObsMode, Region,
-                                  bcd, blackout_table, changed)
+                                  bcd, blackout_table, byte_labels, changed)
 
 PLAYER_X, ENEMY_X, PLAYER_Y, ENEMY_Y = 32, 33, 34, 35
 PLAYER_SCORE, ENEMY_SCORE = 18, 19  # BCD (ALE reads them as decimal scores)
@@ -89,6 +89,8 @@ LABELS = {
     "enemy_score": lambda ram: bcd(ram[..., ENEMY_SCORE]),
     "clock_minutes": lambda ram: ram[..., CLOCK_MINUTES],
     "clock_seconds": lambda ram: bcd(ram[..., CLOCK_SECONDS]),
+    **byte_labels(["player_colour", "enemy_colour", "ring_colour", "clock_colour"],
+                  (PLAYER_COLOUR, ENEMY_COLOUR, RING_COLOUR, CLOCK_COLOUR)),
 }
 
 GAME = GameSpec(name="Boxing", rom_id="boxing", num_actions=18, regions=REGIONS,

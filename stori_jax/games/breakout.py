@@ -10,6 +10,8 @@ from stori_jax.games.base import (EventOutcome, EventRule, GameSpec, NO_EVENT, R
 BLOCK_RAM = np.arange(0, 36)  # block bitmap: 6 columns of 6 bytes
 BALL_X, BALL_Y, PLAYER_X = 99, 101, 72
 SCORE_HUNDREDS, SCORE_TENS_UNITS = 76, 77
+BALL_PADDLE_COLOUR, BLOCK_ROW_COLOURS = 62, (64, 65, 66, 67, 68, 69)  # top row first
+SCORE_DIGITS = (81, 83, 85)
 
 REGIONS = {
     "blocks": Region(8, 151, 57, 92),
@@ -80,6 +82,9 @@ LABELS = {
     "player_x": lambda ram: ram[..., PLAYER_X],
     "score": lambda ram: 100 * bcd(ram[..., SCORE_HUNDREDS]) + bcd(ram[..., SCORE_TENS_UNITS]),
     **byte_labels([f"block_bitmap_{a}" for a in BLOCK_RAM], BLOCK_RAM),
+    "ball_paddle_colour": lambda ram: ram[..., BALL_PADDLE_COLOUR],
+    **byte_labels([f"block_row_colour_{k}" for k in range(6)], BLOCK_ROW_COLOURS),
+    **byte_labels([f"score_digit_{k}" for k in range(3)], SCORE_DIGITS),
 }
 
 GAME = GameSpec(name="Breakout", rom_id="breakout", num_actions=4, regions=REGIONS,
