@@ -54,7 +54,9 @@ def main(argv=None):
              "Made by `docs/make_pictures.py` with `stori_jax.visual.contact_sheet` (what "
              "`stori-jax show` draws): top row the default game, bottom row the mode, same seed "
              f"and actions. Masks at p = 1; events at p = {EVENT_PROB} (most events change the "
-             "RAM, not the picture: the caption counts the firings).", ""]
+             "RAM, not the picture: the caption counts the firings). A RAM mode leaves the game "
+             "untouched and shows the next frame under NOOP of the modified RAM, so its picture "
+             "also differs from the true frame where nothing is hidden.", ""]
     current = None
     for game, kind, mode, description, config in tqdm(list(mode_configs()), desc="modes"):
         if game != current:
