@@ -167,6 +167,21 @@ def test_boxing_hide_enemy_removes_the_black_boxer():
     assert (black(all_obs(run)) == 0).all()
 
 
+@pytest.mark.parametrize("mode,score,colour", [(2, (87, 134, 1, 16), BLACK),
+                                               (3, (33, 69, 1, 16), (214, 214, 214))])
+def test_boxing_hiding_a_boxer_hides_its_score(mode, score, colour):
+    """STORI_SPEC 6: RAM mode 2 (enemy) and 3 (player) also hide that side's score digits,
+    drawn in the boxer's colour in the spec's score region."""
+    run, twin = masked_run("Boxing", ObservationMask("ram", mode, 1.0)), twin_run("Boxing")
+    x0, x1, y0, y1 = score
+
+    def digit_pixels(obs):
+        return (obs[:, :, y0:y1 + 1, x0:x1 + 1] == colour).all(-1).sum(axis=(2, 3))
+
+    assert (digit_pixels(all_obs(twin)) > 10).all()
+    assert (digit_pixels(all_obs(run)) == 0).all()
+
+
 # ---------------------------------------------------------------------------------------------
 # blackout and crop: exactly the spec's regions, in the spec's fill
 # ---------------------------------------------------------------------------------------------
