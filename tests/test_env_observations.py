@@ -303,6 +303,17 @@ def test_mask_at_step_granularity_applies_per_step_with_probability_p():
     assert binomial_ok(int(masked.sum()), masked.size, 0.5)
 
 
+def test_mask_at_frame_granularity_applies_to_each_pooled_screen_with_probability_p():
+    """At frame granularity each of the two screens max-pooled into an observation is masked on
+    its own with prob p, so an observation shows the mask with prob 1 - (1 - p)^2."""
+    steps, p = 200, 0.3
+    run = masked_run("Boxing", ObservationMask("crop", 1, p), steps=steps, granularity="frame")
+    assert_same_game(run, twin_run("Boxing", steps=steps))
+    masked = all_masked(run)
+    assert binomial_ok(int(masked.sum()), masked.size, 1 - (1 - p) ** 2)
+    assert not binomial_ok(int(masked.sum()), masked.size, p), "one draw per step would be p"
+
+
 # ---------------------------------------------------------------------------------------------
 # type 0: the RAM observation and its labels
 # ---------------------------------------------------------------------------------------------
