@@ -173,10 +173,6 @@ class Config:
         if self.ram_observation and self.observation is not None:
             raise ValueError("Config.ram_observation (type 0) observes the RAM, so it cannot be "
                              "combined with an observation mask (type 3.2)")
-        if self.ram_observation and self.drift is not None \
-                and self.drift.secondary.observation is not None:
-            raise ValueError("Config.ram_observation (type 0) observes the RAM, so it cannot be "
-                             "combined with an observation mask (type 3.2) in drift.secondary")
         derived = self._derive_type()
         if self.type:
             _check_choice("Config", "type", self.type, TAXONOMY_TYPES + ("mixed",))
@@ -187,9 +183,7 @@ class Config:
         if self.drift is not None:
             self._check_secondary(self.drift.secondary)
         if self.game is not None:
-            from stori_jax.games import get_game  # local import: games imports nothing of ours
-
-            get_game(self.game).validate(self)
+            _game_spec(self.game).validate(self)
 
     def _check_secondary(self, secondary: "Config") -> None:
         """Concept 2 lives inside this config: nothing it sets may be ignored or contradict it."""
@@ -197,12 +191,15 @@ class Config:
             if getattr(self, name) is not None and getattr(secondary, name) is not None:
                 raise ValueError(f"Config.{name} is set both directly and in drift.secondary; "
                                  "set it in one place only")
+        if self.ram_observation and secondary.observation is not None:
+            raise ValueError("Config.ram_observation (type 0) observes the RAM, so it cannot be "
+                             "combined with an observation mask (type 3.2) in drift.secondary")
         if secondary.granularity != "frame" and secondary.granularity != self.granularity:
             raise ValueError(f"Config.drift.secondary.granularity {secondary.granularity!r} is not "
                              f"used: both concepts draw events at Config.granularity "
                              f"({self.granularity!r}); set it there")
         if secondary.game is not None and self.game is not None \
-                and _rom_id(secondary.game) != _rom_id(self.game):
+                and _game_spec(secondary.game).rom_id != _game_spec(self.game).rom_id:
             raise ValueError(f"Config.drift.secondary is bound to game {secondary.game!r} but "
                              f"Config.game is {self.game!r}; a drift stays in one game")
 
@@ -260,10 +257,10 @@ class Config:
         return config_from_reference(d, game=game)
 
 
-def _rom_id(game: str) -> str:
+def _game_spec(game: str):
     from stori_jax.games import get_game  # local import: games imports nothing of ours
 
-    return get_game(game).rom_id
+    return get_game(game)
 
 
 def _describe_part(part) -> str:
