@@ -17,6 +17,7 @@ when ``game`` is given, and again by :func:`stori_jax.make`.
 from __future__ import annotations
 
 import dataclasses
+import numbers
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
@@ -29,18 +30,21 @@ SECONDARY_TYPES = ("1", "2.1", "3.2")
 
 
 def _check_probability(owner: str, name: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise ValueError(f"{owner}.{name} must be a number in [0, 1], got {value!r}")
-    value = float(value)
+    try:
+        value = float(value)
+    except OverflowError:
+        raise ValueError(f"{owner}.{name} must be in [0, 1], got {value!r}") from None
     if not 0.0 <= value <= 1.0:
         raise ValueError(f"{owner}.{name} must be in [0, 1], got {value}")
     return value
 
 
 def _check_int(owner: str, name: str, value: Any) -> int:
-    if isinstance(value, bool) or not isinstance(value, int):
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise ValueError(f"{owner}.{name} must be an int, got {value!r}")
-    return value
+    return int(value)
 
 
 def _check_choice(owner: str, name: str, value: Any, allowed) -> Any:
@@ -67,15 +71,18 @@ class ActionNoise:
         if not isinstance(self.sticky, bool):
             raise ValueError(f"ActionNoise.sticky must be True or False, got {self.sticky!r}")
         if self.replacement_actions is not None:
-            actions = tuple(self.replacement_actions)
-            if not actions or any(isinstance(a, bool) or not isinstance(a, int) or a < 0
-                                  for a in actions):
+            try:
+                actions = tuple(self.replacement_actions)
+            except TypeError:
+                actions = ()
+            if not actions or any(isinstance(a, bool) or not isinstance(a, numbers.Integral)
+                                  or a < 0 for a in actions):
                 raise ValueError("ActionNoise.replacement_actions must be a non-empty tuple of "
                                  f"action indices >= 0 (or None), got {self.replacement_actions!r}")
             if self.sticky:
                 raise ValueError("ActionNoise.replacement_actions cannot be combined with "
                                  "sticky=True (sticky repeats the previous action)")
-            object.__setattr__(self, "replacement_actions", actions)
+            object.__setattr__(self, "replacement_actions", tuple(int(a) for a in actions))
 
 
 @dataclass(frozen=True)
@@ -88,6 +95,7 @@ class RandomEvent:
 
     def __post_init__(self):
         mode = _check_int("RandomEvent", "mode", self.mode)
+        object.__setattr__(self, "mode", mode)
         if mode < 1:
             raise ValueError(f"RandomEvent.mode must be >= 1 (a game's event modes), got {mode}")
         object.__setattr__(self, "prob", _check_probability("RandomEvent", "prob", self.prob))
@@ -109,6 +117,7 @@ class ObservationMask:
     def __post_init__(self):
         _check_choice("ObservationMask", "kind", self.kind, MASK_KINDS)
         mode = _check_int("ObservationMask", "mode", self.mode)
+        object.__setattr__(self, "mode", mode)
         if self.kind == "crop":
             _check_choice("ObservationMask", "mode (crop)", mode, CROP_MODES)
         elif mode < 1:
@@ -133,6 +142,7 @@ class ConceptDrift:
     def __post_init__(self):
         _check_choice("ConceptDrift", "schedule", self.schedule, DRIFT_SCHEDULES)
         period = _check_int("ConceptDrift", "period", self.period)
+        object.__setattr__(self, "period", period)
         if period < 1:
             raise ValueError(f"ConceptDrift.period (T) must be >= 1 agent step, got {period}")
         if not isinstance(self.secondary, Config):

@@ -28,11 +28,17 @@ def emulator_seeds(seed: int, num_envs: int) -> list[int]:
             for i in range(num_envs)]
 
 
-def _check_int(name: str, value, minimum: int) -> int:
+# seeds feed 32-bit JAX keys and envpool's int32 seed: larger ones would alias smaller ones
+MAX_SEED = 2**31 - 1
+
+
+def _check_int(name: str, value, minimum: int, maximum: int | None = None) -> int:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise ValueError(f"{name} must be an int >= {minimum}, got {value!r}")
     if value < minimum:
         raise ValueError(f"{name} must be >= {minimum}, got {value}")
+    if maximum is not None and value > maximum:
+        raise ValueError(f"{name} must be in [{minimum}, {maximum}], got {value}")
     return int(value)
 
 
@@ -70,13 +76,16 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
     cfg = resolve_config(game, preset, config)
     if cfg.game is not None and get_game(cfg.game) is not spec:
         raise ValueError(f"config is bound to game {cfg.game!r} but make() was asked for {game!r}")
+    cfg.for_game(spec.name)  # the game's modes, the drift's secondary included, or a clear error
     if granularity is not None:
         if granularity not in GRANULARITIES:
             raise ValueError(f"granularity must be one of {list(GRANULARITIES)} or None, "
                              f"got {granularity!r}")
         cfg = cfg.replace(granularity=granularity)
     num_envs = _check_int("num_envs", num_envs, 1)
-    seed = _check_int("seed", seed, 0)
+    seed = _check_int("seed", seed, 0, MAX_SEED)
+    if not isinstance(autoreset, (bool, np.bool_)):
+        raise ValueError(f"autoreset must be True or False, got {autoreset!r}")
     frame_skip = _check_int("frame_skip", frame_skip, 1)
     max_episode_frames = _check_int("max_episode_frames", max_episode_frames, 1)
     noop_max = _check_int("noop_max", noop_max, 0)
@@ -96,6 +105,10 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
     plan = compile_plan(cfg, spec, num_envs=num_envs, frame_skip=frame_skip, obs=obs,
                         noop_max=noop_max, autoreset=bool(autoreset))
     if backend == "envpool":
+        for name, value in (("num_workers", num_workers), ("inline_envs", inline_envs)):
+            if value is not None:
+                raise ValueError(f"{name} applies to backend='subproc' only (envpool runs its "
+                                 f"own threads); leave it None, got {value!r}")
         from envpool_bridge import FRAMES_LAYOUT, make_envpool_backend
 
         plan = dataclasses.replace(plan, frames_layout=FRAMES_LAYOUT)
@@ -226,16 +239,18 @@ class Env:
             with contextlib.suppress(InterruptedStepError):
                 self.backend.recv()
             self._in_flight = None
+        # until this reset has finished, an interruption (Ctrl-C) leaves an env that needs one
+        self._needs_reset = True
         zeros = jnp.zeros((self.num_envs,), jnp.int32)
         state = self._state._replace(episode_step=zeros, prev_executed=zeros)
         state, draws = before_step(self._jit_plan, state, zeros, resetting=True)
         self._write_inputs(self.backend.views, draws, reset_first=None)
         self.backend.send_reset()
         out = self.backend.recv()
-        self._needs_reset = False
-        self._reset_pending[:] = False
         everyone = np.ones(self.num_envs, bool)
         obs, _, _, _, info = self._finish(state, draws, out, everyone, everyone)
+        self._needs_reset = False
+        self._reset_pending[:] = False
         return obs, info
 
     def validate_actions(self, actions) -> np.ndarray:
@@ -247,8 +262,10 @@ class Env:
             raise ValueError(f"actions must be an array of {expected}, got {actions!r}") from e
         if a.shape != (self.num_envs,):
             raise ValueError(f"actions must have {expected}, got shape {a.shape}")
-        if not np.issubdtype(a.dtype, np.integer):
-            raise ValueError(f"actions must have an integer dtype ({expected}), got {a.dtype}")
+        if a.dtype.kind not in "iu" or (isinstance(actions, (list, tuple)) and any(
+                isinstance(x, (bool, np.bool_)) for x in actions)):
+            raise ValueError(f"actions must have an integer dtype ({expected}), got {a.dtype}"
+                             + (" with bools" if a.dtype.kind in "iu" else ""))
         if a.size and (a.min() < 0 or a.max() >= self.num_actions):
             raise ValueError(f"actions out of range: expected {expected}, got values "
                              f"{a.min()}..{a.max()}")
@@ -259,7 +276,7 @@ class Env:
         self._check_open()
         if self._needs_reset:
             raise RuntimeError("call reset() first (before the first step, and after an "
-                               "interrupted step)")
+                               "interrupted step or reset)")
         if self._in_flight is not None:
             raise RuntimeError("a step is already in flight: call recv() before send() again")
         a = self.validate_actions(actions)
@@ -275,18 +292,29 @@ class Env:
         """Finish the step started by :meth:`send`: (obs, reward, terminated, truncated, info)."""
         self._check_open()
         if self._in_flight is None:
+            if self._needs_reset:
+                raise RuntimeError("nothing in flight, and the env needs reset() (before the "
+                                   "first step, and after an interrupted step or reset)")
             raise RuntimeError("nothing in flight: call send(actions) first")
         state, draws, was_reset = self._in_flight
         try:
-            out = self.backend.recv()  # if interrupted (Ctrl-C), the step stays in flight
+            out = self.backend.recv()
+            done = (out["terminated"] | out["truncated"]).astype(bool)
+            new_episode = was_reset | (done if self.plan.autoreset else False)
+            result = self._finish(state, draws, out, new_episode, was_reset)
         except InterruptedStepError:
             self._in_flight, self._needs_reset = None, True
             raise
+        except BaseException:
+            # interrupted (Ctrl-C) while waiting: the step stays in flight and the next recv()
+            # resumes it.  Interrupted after the emulators finished: they are a step ahead of
+            # this env's state, so it needs a reset rather than silently diverging.
+            if not getattr(self.backend, "pending", False):
+                self._in_flight, self._needs_reset = None, True
+            raise
         self._in_flight = None
-        done = (out["terminated"] | out["truncated"]).astype(bool)
-        new_episode = was_reset | (done if self.plan.autoreset else False)
         self._reset_pending = np.zeros(self.num_envs, bool) if self.plan.autoreset else done
-        return self._finish(state, draws, out, new_episode, was_reset)
+        return result
 
     def step(self, actions):
         """One agent step of every env: (obs, reward, terminated, truncated, info)."""

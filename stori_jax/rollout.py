@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numbers
 from typing import Any, Callable, NamedTuple
 
 import jax
@@ -28,8 +29,12 @@ def rollout(env, policy_fn: Callable[[Any, jax.Array, jax.Array], jax.Array], pa
     here; its randomness comes from ``key`` (split once per step), so the same key, params and
     env seed give the same trajectory.
     """
-    if not isinstance(num_steps, int) or num_steps < 1:
+    if isinstance(num_steps, bool) or not isinstance(num_steps, numbers.Integral) \
+            or num_steps < 1:
         raise ValueError(f"num_steps must be an int >= 1, got {num_steps!r}")
+    if not isinstance(key, jax.Array):
+        raise ValueError(f"key must be a JAX PRNG key (jax.random.key(seed) or "
+                         f"jax.random.PRNGKey(seed)), got {key!r}")
     policy = jax.jit(policy_fn)
     if obs is None:
         obs, _ = env.reset()

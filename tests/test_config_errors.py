@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import re
 
+import numpy as np
 import pytest
 
 from stori_jax import (ActionNoise, Config, ConceptDrift, ObservationMask, RandomEvent,
@@ -141,6 +142,24 @@ def test_probability_not_a_number(owner, make, p):
 def test_probability_bounds_are_allowed(owner, make):
     for p in (0, 0.0, 1, 1.0, 0.5):
         assert make(p).prob == float(p) and isinstance(make(p).prob, float)
+
+
+def test_numpy_scalars_are_accepted_and_stored_as_python_numbers():
+    noise = ActionNoise(np.float32(0.25), replacement_actions=np.arange(2))
+    assert noise.prob == 0.25 and noise.replacement_actions == (0, 1)
+    assert type(noise.replacement_actions[0]) is int
+    mask = ObservationMask("crop", np.int64(5), np.float64(0.5))
+    assert (mask.mode, mask.prob) == (5, 0.5) and type(mask.mode) is int
+    assert RandomEvent(np.int32(1), 1).mode == 1
+    drift = ConceptDrift("sudden", np.int64(7), SECONDARY_OK)
+    assert drift.period == 7 and type(drift.period) is int
+
+
+def test_a_huge_probability_or_a_non_sequence_of_actions_is_a_clear_error():
+    with pytest.raises(ValueError, match=r"ActionNoise\.prob must be in \[0, 1\]"):
+        ActionNoise(10**400)
+    with pytest.raises(ValueError, match=r"replacement_actions must be a non-empty tuple .*got 3"):
+        ActionNoise(0.3, replacement_actions=3)
 
 
 # -- concept drift -----------------------------------------------------------------------------

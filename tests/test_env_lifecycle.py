@@ -210,7 +210,8 @@ def test_wrong_action_shape(breakout, actions):
 
 
 @pytest.mark.parametrize("actions", [np.zeros(3, np.float32), [0.0, 1.0, 2.0],
-                                     np.array([True, False, True])])
+                                     np.array([True, False, True]), [True, 0, 1],
+                                     np.zeros(3, "timedelta64[s]")])
 def test_non_integer_actions(breakout, actions):
     with pytest.raises(ValueError, match=r"integer.*\(3,\).*\[0, 3\]"):
         breakout.step(actions)
@@ -285,6 +286,15 @@ def test_step_before_reset_and_send_recv_misuse():
     (dict(game="Breakout", config=Config(observation=ObservationMask("blackout", 12))),
      r"blackout modes: allowed \[1, 2, .*11\]"),
     (dict(game="Boxing", config=Config(game="Breakout")), r"bound to game 'Breakout'"),
+    (dict(game="Gopher", config=Config(drift=ConceptDrift(
+        "sudden", 5, Config(action_noise=stori_jax.ActionNoise(0.3), game="Boxing")))),
+     r"secondary.*Boxing"),
+    (dict(game="Breakout", seed=2**31), r"seed must be in \[0, 2147483647\], got 2147483648"),
+    (dict(game="Breakout", autoreset="False"), r"autoreset must be True or False, got 'False'"),
+    (dict(game="Breakout", backend="envpool", num_workers=2),
+     r"num_workers applies to backend='subproc' only"),
+    (dict(game="Breakout", backend="envpool", inline_envs=0),
+     r"inline_envs applies to backend='subproc' only"),
 ])
 def test_bad_make_arguments(kwargs, pattern):
     kwargs = dict(kwargs)
@@ -323,3 +333,76 @@ def test_an_interrupt_inside_inline_emulation_requires_a_reset():
         assert obs.shape == (3, 128)
     finally:
         env.close()
+
+
+def test_workers_outlive_the_thread_that_made_the_env():
+    """Workers watch their parent process, not the thread that started them: an env made in a
+    short-lived thread (a thread pool, a data loader) keeps working after that thread ends."""
+    made = {}
+    thread = threading.Thread(target=lambda: made.update(env=make("Breakout")))
+    thread.start()
+    thread.join()
+    env = made["env"]
+    try:
+        time.sleep(0.5)
+        assert not any(process_gone(pid) for pid in env.backend.pids)
+        env.reset()
+        obs, *_ = env.step([0, 1])
+        assert obs.shape == (2, 128)
+    finally:
+        env.close()
+
+
+def test_an_interrupt_after_the_emulators_finished_requires_a_reset():
+    """Ctrl-C between the workers' reply and the env's own bookkeeping: the emulators are a step
+    ahead of the env's state, so the env must refuse to step on (not silently diverge)."""
+    env = make("Breakout")
+    try:
+        env.reset()
+        real_finish = env._finish
+
+        def interrupted(*args):
+            raise KeyboardInterrupt
+
+        env._finish = interrupted
+        with pytest.raises(KeyboardInterrupt):
+            env.step([0, 1])
+        env._finish = real_finish
+        with pytest.raises(RuntimeError, match=r"call reset\(\) first"):
+            env.step([0, 1])
+        with pytest.raises(RuntimeError, match=r"needs reset\(\)"):
+            env.recv()
+        env.reset()
+        obs, *_ = env.step([0, 1])
+        assert obs.shape == (2, 128)
+    finally:
+        env.close()
+
+
+def test_an_interrupted_reset_says_reset_again():
+    """Ctrl-C while the workers reset: step, recv and snapshot all point to reset(), and a
+    second reset() gives the same first observation as an uninterrupted one."""
+    env, twin = make("Breakout"), make("Breakout")
+    try:
+        real_recv = env.backend.recv
+
+        def interrupted():
+            raise KeyboardInterrupt
+
+        env.backend.recv = interrupted
+        with pytest.raises(KeyboardInterrupt):
+            env.reset()
+        env.backend.recv = real_recv
+        assert env.backend.pending
+        with pytest.raises(RuntimeError, match=r"call reset\(\) first"):
+            env.step([0, 1])
+        with pytest.raises(RuntimeError, match=r"needs reset\(\)"):
+            env.recv()
+        with pytest.raises(RuntimeError, match=r"reset\(\) it"):
+            env.snapshot()
+        obs, _ = env.reset()
+        twin_obs, _ = twin.reset()
+        np.testing.assert_array_equal(np.asarray(obs), np.asarray(twin_obs))
+    finally:
+        env.close()
+        twin.close()

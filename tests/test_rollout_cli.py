@@ -37,6 +37,13 @@ def test_rollout_rejects_bad_num_steps():
     with stori_jax.make("Breakout", num_envs=1, seed=0, obs="ram") as env:
         with pytest.raises(ValueError, match="num_steps must be an int >= 1"):
             stori_jax.rollout(env, random_policy, {"num_actions": 4}, jax.random.PRNGKey(0), 0)
+        with pytest.raises(ValueError, match="num_steps must be an int >= 1, got True"):
+            stori_jax.rollout(env, random_policy, {"num_actions": 4}, jax.random.PRNGKey(0), True)
+        with pytest.raises(ValueError, match=r"key must be a JAX PRNG key .*got 0"):
+            stori_jax.rollout(env, random_policy, {"num_actions": 4}, 0, 2)
+        traj = stori_jax.rollout(env, random_policy, {"num_actions": 4}, jax.random.PRNGKey(0),
+                                 np.int64(2))
+        assert traj.action.shape == (2, 1)
 
 
 def test_cli_list_prints_presets_and_modes(capsys):

@@ -178,9 +178,11 @@ class SubprocBackend:
         if self._waiting is None:
             self._waiting, self._replies = dict(enumerate(self.conns)), {}
         waiting = self._waiting
-        sentinels = {p.sentinel: w for w, p in enumerate(self.processes)}
         try:
             while waiting:
+                # only the workers still to reply: a finished worker that dies meanwhile is
+                # reported by the next command, instead of waking this loop over and over
+                sentinels = {self.processes[w].sentinel: w for w in waiting}
                 ready = wait(list(waiting.values()) + list(sentinels), timeout=None)
                 for obj in ready:
                     if obj in sentinels:

@@ -15,6 +15,8 @@ import copy
 import os
 import pickle
 import signal
+import threading
+import time
 import traceback
 from dataclasses import dataclass
 
@@ -219,23 +221,25 @@ def make_emulators(spec: WorkerSpec, views: dict) -> list[Emulator]:
             for i, seed in zip(range(spec.env_lo, spec.env_hi), spec.seeds)]
 
 
-def _die_with_parent() -> None:
-    """Ask Linux to kill this worker if the parent dies (no orphans after a hard kill)."""
-    try:
-        import ctypes
+def _exit_with_parent(parent_pid: int, interval: float = 0.5) -> None:
+    """Exit as soon as the parent process is gone (no orphans after a hard kill of it).  A
+    watchdog thread, not Linux's PR_SET_PDEATHSIG: that fires when the parent's *thread* that
+    started this worker exits, which would kill the workers of an env made in a short-lived
+    thread (a thread pool, a data loader) while the env is still in use."""
+    def watch():
+        while os.getppid() == parent_pid:
+            time.sleep(interval)
+        os._exit(0)
 
-        libc = ctypes.CDLL("libc.so.6", use_errno=True)
-        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        pass
+    threading.Thread(target=watch, daemon=True, name="stori-jax-parent-watch").start()
 
 
 def worker_main(spec: WorkerSpec, buffers, conn, parent_pid: int) -> None:
     """Entry point of a worker process."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
-    _die_with_parent()
     if os.getppid() != parent_pid:
         return
+    _exit_with_parent(parent_pid)
     try:
         emulators = make_emulators(spec, buffers.views())
         conn.send_bytes(b"K")
