@@ -10,6 +10,11 @@ The reference format is a nested dict (or the same flattened with dotted keys), 
     partial_observation.type ('crop'|'blackout'|'ram'), .mode, .prob
 
 A 2.2 config takes its secondary concept's parameters from the same dict's other sections.
+
+Every key above is accepted whatever ``stochasticity_type`` selects (the reference's config files
+carry all sections); the sections of types that are not selected are read by nothing and their
+values are not checked.  Any other key is an error, as is the same key given twice (nested and
+dotted) with different values.
 """
 
 from __future__ import annotations
@@ -24,18 +29,35 @@ _ACTION = "intrinsic_stochasticity.action_dependent"
 _RANDOM = "intrinsic_stochasticity.action_independent_random"
 _DRIFT = "intrinsic_stochasticity.action_independent_concept_drift"
 _OBS = "partial_observation"
+KNOWN_KEYS = ("stochasticity_type",
+              f"{_ACTION}.stochastic_action_prob",
+              f"{_RANDOM}.mode", f"{_RANDOM}.random_stochasticity_prob",
+              f"{_DRIFT}.temporal_mode", f"{_DRIFT}.temporal_threshold",
+              f"{_DRIFT}.secondary_concept_type",
+              f"{_OBS}.type", f"{_OBS}.mode", f"{_OBS}.prob")
 
 
 def flatten(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
-    """Nested dict -> {dotted.key: value}; already-dotted keys pass through."""
+    """Nested dict -> {dotted.key: value}; already-dotted keys pass through.  A key given twice
+    (e.g. nested and dotted) with different values is a ``ValueError``."""
     out: dict[str, Any] = {}
     for key, value in d.items():
         full = f"{prefix}{key}"
-        if isinstance(value, Mapping):
-            out.update(flatten(value, full + "."))
-        else:
-            out[full] = value
+        items = (flatten(value, full + ".").items() if isinstance(value, Mapping)
+                 else [(full, value)])
+        for k, v in items:
+            if k in out and not _same(out[k], v):
+                raise ValueError(f"reference config gives {k!r} twice with different values "
+                                 f"({out[k]!r} and {v!r}); give it once")
+            out[k] = v
     return out
+
+
+def _same(a, b) -> bool:
+    try:
+        return bool(a == b)
+    except (TypeError, ValueError):  # e.g. arrays, whose == is elementwise
+        return a is b
 
 
 class _Reader:
@@ -95,9 +117,22 @@ def _concept(kind: str, r: _Reader) -> Config:
 
 
 def config_from_reference(d: Mapping[str, Any], game: str | None = None) -> Config:
+    """The :class:`Config` of a reference config ``d`` (nested, dotted or a mix), bound to
+    ``game`` if given.
+
+    Only the sections of the selected ``stochasticity_type`` are read (for 2.2 also its
+    secondary concept's section); the other sections of the format are accepted and ignored, as
+    the reference does, since its config files carry all of them.  Unknown keys, and a key given
+    both nested and dotted with different values, are a ``ValueError``.
+    """
     if not isinstance(d, Mapping):
         raise ValueError(f"reference config must be a dict (nested or dotted keys), got {d!r}")
-    r = _Reader(flatten(d))
+    flat = flatten(d)
+    unknown = [k for k in flat if k not in KNOWN_KEYS]
+    if unknown:
+        raise ValueError(f"reference config has unknown key(s) {unknown}; "
+                         f"known keys: {list(KNOWN_KEYS)}")
+    r = _Reader(flat)
     kind = r.get("stochasticity_type", lambda v: str(v).strip(), f"one of {list(_TYPES)}")
     if kind not in _TYPES:
         raise ValueError(f"stochasticity_type must be one of {list(_TYPES)}, got {kind!r}")

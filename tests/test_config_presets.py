@@ -237,3 +237,55 @@ def test_reference_values_as_numbers_and_strings():
          f"{IS}.action_independent_random.random_stochasticity_prob": 0.5}
     assert Config.from_reference(d) == Config(event=RandomEvent(2, 0.5))
 
+
+
+def test_reference_unknown_keys_are_rejected():
+    # the misspelled/unknown probability key used to be dropped, giving prob=1.0
+    d = {"stochasticity_type": "3.2", "partial_observation.type": "crop",
+         "partial_observation.mode": "1", "partial_observation.probability": 0.25}
+    with pytest.raises(ValueError, match=r"unknown key\(s\) \['partial_observation.probability'\]"
+                                         r".*known keys: .*'partial_observation.prob'"):
+        Config.from_reference(d)
+    nested = {"stochasticity_type": "1", IS: {"action_dependent": {"stochastic_action_prob": 0.3,
+                                                                   "sticky": True}}}
+    with pytest.raises(ValueError, match=rf"unknown key\(s\) \['{IS}.action_dependent.sticky'\]"):
+        Config.from_reference(nested)
+    with pytest.raises(ValueError, match=r"unknown key\(s\) \['partial_observation'\]"):
+        Config.from_reference({"stochasticity_type": "3.1", "partial_observation": "crop"})
+    with pytest.raises(ValueError, match=r"unknown key\(s\) \['stochasticity'\]"):
+        Config.from_reference({"stochasticity_type": "3.1", "stochasticity": "1"})
+
+
+def test_reference_sections_of_unselected_types_are_accepted_and_unused():
+    # a real reference config carries every section; only the selected type's is read
+    d = reference_dict("1", action_prob=0.3, full=True)
+    d["partial_observation"]["mode"] = "0"  # not read for type 1, so not checked
+    assert Config.from_reference(d) == Config(action_noise=ActionNoise(0.3))
+    assert Config.from_reference(dotted(d)) == Config(action_noise=ActionNoise(0.3))
+
+
+def test_reference_conflicting_nested_and_dotted_keys_are_rejected():
+    key = "partial_observation.prob"
+    d = {"stochasticity_type": "3.2",
+         "partial_observation": {"type": "crop", "mode": "1", "prob": 0.5}, key: 0.25}
+    with pytest.raises(ValueError, match=rf"gives '{key}' twice with different values "
+                                         r"\(0.5 and 0.25\)"):
+        Config.from_reference(d)
+    d = {key: 0.25, "stochasticity_type": "3.2",  # the other order too
+         "partial_observation": {"type": "crop", "mode": "1", "prob": 0.5}}
+    with pytest.raises(ValueError, match=rf"gives '{key}' twice"):
+        Config.from_reference(d)
+    d = {"stochasticity_type": "1", IS: {"action_dependent.stochastic_action_prob": 0.3,
+                                         "action_dependent": {"stochastic_action_prob": 0.2}}}
+    with pytest.raises(ValueError, match=r"stochastic_action_prob' twice"):
+        Config.from_reference(d)
+    # the same value given twice is not a conflict
+    d = {"stochasticity_type": "3.2", "partial_observation": {"type": "crop", "mode": "1",
+                                                              "prob": 0.5}, key: 0.5}
+    assert Config.from_reference(d) == Config(observation=ObservationMask("crop", 1, 0.5))
+
+
+def test_reference_mode_0_is_still_refused():
+    d = {"stochasticity_type": "3.2", "partial_observation": {"type": "crop", "mode": "0"}}
+    with pytest.raises(ValueError, match="mode"):
+        Config.from_reference(d)

@@ -5,7 +5,7 @@ import pytest
 
 import stori_jax
 from stori_jax.functional import corrupt_actions, env_keys
-from stori_jax.metrics import (action_channel_capacity, channel_matrix,
+from stori_jax.metrics import (MAX_ACTIONS, action_channel_capacity, channel_matrix,
                                empirical_action_information, mutual_information,
                                next_state_variance)
 
@@ -57,6 +57,89 @@ def test_bad_inputs():
         empirical_action_information([0, 1], [0], 4)
     with pytest.raises(ValueError, match=r"states must be \(T, B, D\)"):
         next_state_variance(np.zeros((3, 4)))
+
+
+def test_empirical_action_ids_are_validated():
+    # -1 used to wrap around to the last action and give a wrong number
+    with pytest.raises(ValueError, match=r"intended must be action ids in \[0, 3\], got \[-1\]"):
+        empirical_action_information([0, 1, 2, -1], [0, 1, 2, 3], 4)
+    with pytest.raises(ValueError, match=r"executed must be action ids in \[0, 3\], got \[4\]"):
+        empirical_action_information([0, 1, 2, 3], [0, 1, 2, 4], 4)
+    with pytest.raises(TypeError, match="intended must be integer action ids"):
+        empirical_action_information([0.0, 1.0], [0, 1], 4)
+    with pytest.raises(ValueError, match="same size and shape"):  # would pair the wrong elements
+        empirical_action_information(np.zeros((2, 3), int), np.zeros((3, 2), int), 4)
+    with pytest.raises(ValueError, match="non-empty"):
+        empirical_action_information([], [], 4)
+    with pytest.raises(TypeError, match="num_actions must be an int"):
+        empirical_action_information([0], [0], 4.0)
+    assert empirical_action_information(np.array([0, 1, 2, 3]), np.array([0, 1, 2, 3]),
+                                        np.int64(4)) == pytest.approx(2.0)
+
+
+def test_mutual_information_inputs_are_validated():
+    with pytest.raises(ValueError, match=r"channel must be \(1, m\).*got shape \(2, 2\)"):
+        mutual_information([1.0], np.eye(2))
+    with pytest.raises(ValueError, match="input_dist must be a non-empty 1-D"):
+        mutual_information(np.full((2, 2), 0.25), np.eye(2))
+    with pytest.raises(ValueError, match="input_dist must be finite and non-negative"):
+        mutual_information([1.5, -0.5], np.eye(2))
+    with pytest.raises(ValueError, match="input_dist must be finite"):
+        mutual_information([np.nan, 1.0], np.eye(2))
+    with pytest.raises(ValueError, match=r"input_dist must sum to 1"):
+        mutual_information([0.5, 0.4], np.eye(2))
+    with pytest.raises(ValueError, match=r"channel rows must sum to 1"):
+        mutual_information([0.5, 0.5], [[1.0, 0.0], [0.5, 0.4]])
+    with pytest.raises(ValueError, match="channel rows must be finite and non-negative"):
+        mutual_information([0.5, 0.5], [[1.5, -0.5], [0.0, 1.0]])
+    with pytest.raises(TypeError, match="input_dist must be an array of numbers"):
+        mutual_information(["a", "b"], np.eye(2))
+    # a tiny rounding error is fine, and a channel may have a different output alphabet
+    assert mutual_information([0.5, 0.5 + 1e-9], np.eye(2)) == pytest.approx(1.0)
+    assert mutual_information([0.5, 0.5], [[1.0, 0.0, 0.0], [0.0, 0.5, 0.5]]) == pytest.approx(1.0)
+
+
+def test_channel_matrix_replacement_is_validated_and_repeats_count():
+    # the environment draws uniformly from the replacement tuple by position, so a repeated id
+    # weighs more; the rows used to sum to 1 - p/2 for [1, 1]
+    m = channel_matrix(4, 0.3, [1, 1])
+    np.testing.assert_allclose(m.sum(1), 1.0)
+    np.testing.assert_allclose(m[0], [0.7, 0.3, 0.0, 0.0])
+    np.testing.assert_allclose(channel_matrix(4, 0.3, [1, 1, 2])[3], [0, 0.2, 0.1, 0.7])
+    np.testing.assert_allclose(channel_matrix(4, 0.3, np.arange(4)), channel_matrix(4, 0.3))
+    with pytest.raises(ValueError,
+                       match=r"replacement must be action ids in \[0, 3\], got \[-1, 5\]"):
+        channel_matrix(4, 0.3, [-1, 0, 5])
+    with pytest.raises(ValueError, match="replacement must be non-empty"):
+        channel_matrix(4, 0.3, [])
+    with pytest.raises(TypeError, match="replacement must be int action ids"):
+        channel_matrix(4, 0.3, [1.0, 2.0])
+    with pytest.raises(TypeError, match="replacement must be int action ids"):
+        channel_matrix(4, 0.3, [True])
+    with pytest.raises(TypeError, match="replacement must be a sequence of action ids"):
+        channel_matrix(4, 0.3, "01")
+
+
+@pytest.mark.parametrize("n, p, error, message", [
+    (4, "0.3", TypeError, r"prob must be a number in \[0, 1\]"),
+    (4, True, TypeError, r"prob must be a number in \[0, 1\]"),
+    (4, float("nan"), ValueError, r"prob must be in \[0, 1\]"),
+    (4, -0.1, ValueError, r"prob must be in \[0, 1\]"),
+    (2.5, 0.3, TypeError, "num_actions must be an int"),
+    ("4", 0.3, TypeError, "num_actions must be an int"),
+    (0, 0.3, ValueError, r"num_actions must be in \[1, 1024\]"),
+    (10 ** 6, 0.3, ValueError, r"num_actions must be in \[1, 1024\]"),
+])
+def test_capacity_and_channel_arguments_are_validated(n, p, error, message):
+    for fn in (action_channel_capacity, channel_matrix):
+        with pytest.raises(error, match=message):
+            fn(n, p)
+
+
+def test_capacity_accepts_numpy_scalars_and_the_bound():
+    assert action_channel_capacity(np.int64(4), np.float32(0.0)) == pytest.approx(2.0)
+    assert action_channel_capacity(MAX_ACTIONS, 0.0) == pytest.approx(np.log2(MAX_ACTIONS))
+    assert action_channel_capacity(1, 0.5) == 0.0
 
 
 def test_next_state_variance_is_zero_without_noise_and_grows_with_events():
