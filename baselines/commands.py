@@ -35,8 +35,8 @@ def add_parsers(sub) -> None:
                     help="training seed the result is filed under (default: the checkpoint's; "
                          "0 for --random)")
     ev.add_argument("--episodes", type=int, default=100)
-    ev.add_argument("--policy", choices=["sampled", "greedy"], default="sampled",
-                    help="how a checkpoint acts")
+    ev.add_argument("--policy", choices=["sampled", "greedy"], default=None,
+                    help="how a checkpoint acts (default sampled)")
     ev.add_argument("--eval-seed", type=int, default=None,
                     help="environment seed of the evaluation (default: training seed + 10000)")
     ev.add_argument("--num-envs", type=int, default=16)
@@ -57,9 +57,12 @@ def _parse_overrides(items: list[str]) -> dict[str, str]:
     overrides = {}
     for item in items:
         name, sep, value = item.partition("=")
+        name, value = name.strip(), value.strip()
         if not sep or not name:
             raise ValueError(f"--set takes FIELD=VALUE, got {item!r}")
-        overrides[name.strip()] = value.strip()
+        if name in overrides:
+            raise ValueError(f"--set {name} given twice ({overrides[name]!r} and {value!r})")
+        overrides[name] = value
     return overrides
 
 
@@ -74,9 +77,9 @@ DEFAULT_ROOT = Path("results") / "train"
 def cmd_train(args) -> int:
     from baselines.evaluate import evaluate, write_result
     from baselines.ppo import PPOConfig, train
+    from stori_jax.cli import check_min, check_out
 
-    if args.eval_episodes < 0:
-        raise ValueError(f"--eval-episodes must be >= 0, got {args.eval_episodes}")
+    check_min("--eval-episodes", args.eval_episodes, 0)
     overrides = _parse_overrides(args.overrides)
     for flag, field in (("--game", "game"), ("--preset", "preset"), ("--seed", "seed"),
                         ("--steps", "total_steps")):
@@ -86,6 +89,7 @@ def cmd_train(args) -> int:
         PPOConfig(game=args.game, preset=args.preset, seed=args.seed, total_steps=args.steps),
         overrides)
     out = args.out or run_dir(DEFAULT_ROOT, config.game, config.preset, "ppo", config.seed)
+    check_out("--out", out, directory=True)
     if not args.resume and (out / "checkpoint.pkl").exists():
         raise ValueError(f"{out} already holds a run: pass --resume to continue it, or another "
                          "--out")
@@ -111,12 +115,21 @@ def cmd_train(args) -> int:
 def cmd_eval(args) -> int:
     from baselines.evaluate import evaluate, write_result
     from baselines.ppo import load_checkpoint
+    from stori_jax.cli import check_min, check_out
 
     if args.random == (args.checkpoint is not None):
         raise ValueError("give either --checkpoint PATH or --random (with --game and --preset)")
+    for flag, value, minimum in (("--seed", args.seed, 0), ("--eval-seed", args.eval_seed, 0),
+                                 ("--episodes", args.episodes, 1),
+                                 ("--num-envs", args.num_envs, 1)):
+        if value is not None:
+            check_min(flag, value, minimum)
     if args.random:
         if args.game is None or args.preset is None:
             raise ValueError("--random needs --game and --preset")
+        if args.policy is not None:
+            raise ValueError("--policy applies to checkpoints only (--random plays the random "
+                             "policy)")
         game, preset, seed, policy = args.game, args.preset, args.seed or 0, "random"
         out = args.out or run_dir(DEFAULT_ROOT, game, preset, "random", seed)
         checkpoint = None
@@ -126,9 +139,10 @@ def cmd_eval(args) -> int:
                                      ("--preset", args.preset, config["preset"])):
             if value is not None and value != trained:
                 raise ValueError(f"{flag} {value} differs from the checkpoint's {trained}")
-        game, preset, policy = config["game"], config["preset"], args.policy
+        game, preset, policy = config["game"], config["preset"], args.policy or "sampled"
         seed = config["seed"] if args.seed is None else args.seed
         out, checkpoint = args.out or args.checkpoint.parent, args.checkpoint
+    check_out("--out", out, directory=True)
     result = evaluate(game, preset, policy=policy, episodes=args.episodes, seed=seed,
                       eval_seed=args.eval_seed, num_envs=args.num_envs, checkpoint=checkpoint,
                       progress=not args.quiet)
@@ -140,7 +154,10 @@ def cmd_eval(args) -> int:
 
 def cmd_table(args) -> int:
     from baselines.table import build_table
+    from stori_jax.cli import check_out
 
+    if args.out is not None:
+        check_out("--out", args.out, directory=True)
     text, paths = build_table(args.results_dir, args.out, ppo_policy=args.policy)
     print(text)
     print("wrote " + ", ".join(str(p) for p in paths))

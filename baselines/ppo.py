@@ -14,6 +14,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import math
 import os
 import pickle
 import time
@@ -112,8 +113,9 @@ class PPOConfig:
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
         for name in ("learning_rate", "clip_coef", "ent_coef", "vf_coef", "max_grad_norm"):
-            if not getattr(self, name) >= 0.0:
-                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+            if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0.0):
+                raise ValueError(f"{name} must be a finite number >= 0, got "
+                                 f"{getattr(self, name)}")
 
     @classmethod
     def from_recorded(cls, recorded: dict) -> "PPOConfig":
@@ -427,13 +429,34 @@ def save_checkpoint(path: Path, payload: dict) -> None:
 
 
 def load_checkpoint(path: Path) -> dict:
+    """The payload of a checkpoint written by :func:`train`; a ValueError saying why if
+    ``path`` is not one."""
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise ValueError(f"checkpoint {path} does not exist")
-    with open(path, "rb") as f:
-        payload = pickle.load(f)
+
+    def refuse(why: str):
+        return ValueError(f"not a stori-jax PPO checkpoint: {path} ({why})")
+
+    if not path.is_file():
+        raise refuse("a directory; give the checkpoint.pkl in it" if path.is_dir()
+                     else "not a regular file")
+    try:
+        with open(path, "rb") as f:
+            payload = pickle.load(f)
+    except Exception as e:  # unpickling junk can raise almost anything
+        raise refuse(f"unreadable: {type(e).__name__}: {e}") from None
     if not isinstance(payload, dict) or payload.get("format") != "stori-jax-ppo-1":
-        raise ValueError(f"{path} is not a stori-jax PPO checkpoint")
+        raise refuse("no format 'stori-jax-ppo-1' marker")
+    missing = [k for k in ("config", "params") if k not in payload]
+    if missing:
+        raise refuse(f"lacks {missing}")
+    if not isinstance(payload["config"], dict):
+        raise refuse("its config is not a dict")
+    try:
+        PPOConfig.from_recorded(payload["config"])
+    except (ValueError, TypeError) as e:
+        raise refuse(f"bad config: {e}") from None
     return payload
 
 

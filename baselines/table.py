@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import warnings
 from collections import defaultdict
 from pathlib import Path
@@ -45,22 +46,57 @@ PAPER_RESULTS = {  # (game, preset): (DreamerV3 mean, std, STORM mean, std)
     ("BankHeist", "3.2"): (849.80, 514.15, 43.10, 22.85),
 }
 EVAL_KEYS = ("game", "preset", "agent", "policy", "train_seed", "mean_return", "episodes")
+AGENTS = ("ppo", "random")  # the table's agent columns, PPO and Random
+
+
+def _read_json_object(path: Path, what: str) -> dict:
+    try:
+        value = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise ValueError(f"{path} is not valid JSON: {e}") from None
+    if not isinstance(value, dict):
+        raise ValueError(f"{path} must hold a JSON object ({what}), got {type(value).__name__}")
+    return value
+
+
+def _is_int(value, minimum: int) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= minimum
+
+
+def _check_evaluation(path: Path, result: dict) -> None:
+    """A clear ValueError if ``result`` is not what ``stori-jax eval`` writes."""
+    from baselines.evaluate import POLICIES
+
+    missing = [k for k in EVAL_KEYS if k not in result]
+    if missing:
+        raise ValueError(f"{path} lacks {missing}: not a stori-jax evaluation")
+    for key in ("game", "preset"):
+        if not isinstance(result[key], str):
+            raise ValueError(f"{path}: {key} must be a string, got {result[key]!r}")
+    if result["agent"] not in AGENTS:
+        raise ValueError(f"{path}: agent must be one of {list(AGENTS)}, got {result['agent']!r}")
+    if result["policy"] not in POLICIES or (result["agent"] == "random") != (
+            result["policy"] == "random"):
+        raise ValueError(f"{path}: policy {result['policy']!r} does not go with agent "
+                         f"{result['agent']!r} (random: 'random'; ppo: 'sampled' or 'greedy')")
+    for key, minimum in (("train_seed", 0), ("episodes", 1)):
+        if not _is_int(result[key], minimum):
+            raise ValueError(f"{path}: {key} must be an int >= {minimum}, got {result[key]!r}")
+    mean = result["mean_return"]
+    if isinstance(mean, bool) or not isinstance(mean, (int, float)) or not math.isfinite(mean):
+        raise ValueError(f"{path}: mean_return must be a finite number, got {mean!r}")
 
 
 def load_evaluations(results_dir: Path) -> list[dict]:
-    """Every eval-*.json below ``results_dir`` (each must hold the keys of EVAL_KEYS)."""
+    """Every eval-*.json below ``results_dir`` (each must hold the keys of EVAL_KEYS, typed as
+    ``stori-jax eval`` writes them)."""
     results_dir = Path(results_dir)
     if not results_dir.is_dir():
         raise ValueError(f"RESULTS_DIR {results_dir} is not a directory")
     found = []
     for path in sorted(results_dir.rglob("eval-*.json")):
-        try:
-            result = json.loads(path.read_text())
-        except json.JSONDecodeError as e:
-            raise ValueError(f"{path} is not valid JSON: {e}") from None
-        missing = [k for k in EVAL_KEYS if k not in result]
-        if missing:
-            raise ValueError(f"{path} lacks {missing}: not a stori-jax evaluation")
+        result = _read_json_object(path, "a stori-jax evaluation")
+        _check_evaluation(path, result)
         found.append(dict(result, path=str(path)))
     if not found:
         raise ValueError(f"no eval-*.json under {results_dir}: run `stori-jax eval` first")
@@ -135,11 +171,22 @@ def learning_curves(results_dir: Path) -> dict[tuple[str, str], list[tuple[np.nd
         config_path = path.parent / "config.json"
         if not config_path.exists():
             continue
-        config = json.loads(config_path.read_text())
+        config = _read_json_object(config_path, "a training run's config")
+        missing = [k for k in ("game", "preset", "seed") if k not in config]
+        if missing:
+            raise ValueError(f"{config_path} lacks {missing}: not a training run's config")
         with open(path, newline="") as f:
-            rows = list(csv.DictReader(f))
-        steps = np.array([int(r["global_step"]) for r in rows])
-        returns = np.array([float(r["return"]) for r in rows])
+            reader = csv.DictReader(f)
+            rows = list(reader)
+        missing = [k for k in ("global_step", "return") if k not in (reader.fieldnames or [])]
+        if missing:
+            raise ValueError(f"{path} lacks the columns {missing}: not a training run's "
+                             "episodes.csv")
+        try:
+            steps = np.array([int(r["global_step"]) for r in rows], dtype=np.int64)
+            returns = np.array([float(r["return"]) for r in rows])
+        except (TypeError, ValueError) as e:  # TypeError: a row shorter than the header
+            raise ValueError(f"{path}: a global_step or return is not a number ({e})") from None
         curves[(config["game"], config["preset"])].append((steps, returns, config["seed"]))
     for runs in curves.values():
         runs.sort(key=lambda run: run[2])

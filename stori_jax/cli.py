@@ -56,15 +56,41 @@ def _cmd_run(args) -> int:
     return 0
 
 
+def check_out(flag: str, path: Path, *, directory: bool) -> None:
+    """Fail before any work starts if ``path`` cannot be the output ``directory`` (or file):
+    it, or the nearest of its parents that exists, is the wrong kind of thing."""
+    path = Path(path)
+    kind = "directory" if directory else "file"
+    if path.exists():
+        if path.is_dir() != directory:
+            raise ValueError(f"{flag} {path} exists and is not a {kind}")
+        return
+    for parent in path.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise ValueError(f"{flag} {path}: {parent} is a file, not a directory")
+            return
+
+
+def check_min(flag: str, value: int, minimum: int) -> None:
+    if value < minimum:
+        raise ValueError(f"{flag} must be >= {minimum}, got {value}")
+
+
 def _selected_presets(games, presets):
     from stori_jax import list_presets
     from stori_jax.presets import preset as check_preset
 
-    chosen = [(g, n) for g, n in list_presets()
-              if (not games or g.lower() in {x.lower() for x in games})
-              and (not presets or n in presets)]
     for g in games or []:
         check_preset(g, "3.1")  # unknown game -> ValueError naming the allowed ones
+    in_games = [(g, n) for g, n in list_presets()
+                if not games or g.lower() in {x.lower() for x in games}]
+    allowed = list(dict.fromkeys(n for _, n in in_games))
+    unknown = [n for n in presets or [] if n not in allowed]
+    if unknown:
+        raise ValueError(f"--presets: unknown {unknown}; allowed"
+                         f"{' for ' + ' '.join(games) if games else ''}: {allowed}")
+    chosen = [(g, n) for g, n in in_games if not presets or n in presets]
     if not chosen:
         raise ValueError(f"no paper preset matches --games {games} --presets {presets}")
     return chosen
@@ -75,8 +101,10 @@ def _cmd_suite(args) -> int:
 
     for name, value in (("--episodes", args.episodes), ("--num-envs", args.num_envs),
                         ("--max-steps", args.max_steps)):
-        if value < 1:
-            raise ValueError(f"{name} must be >= 1, got {value}")
+        check_min(name, value, 1)
+    check_min("--seed", args.seed, 0)
+    if args.out is not None:
+        check_out("--out", args.out, directory=True)
     games = args.games
     if args.checkpoint is not None and not games:  # a checkpoint plays its own game
         from baselines.ppo import load_checkpoint
@@ -97,18 +125,38 @@ def _config_for(args):
 
     import stori_jax
 
-    if (args.preset is None) == (args.config is None):
+    if args.preset is not None and args.config is not None:
         raise ValueError("give a PRESET or --config FILE (a reference-format JSON), not both")
+    if args.preset is None and args.config is None:
+        raise ValueError("give a PRESET (e.g. 3.1; `stori-jax list` shows them) or --config "
+                         "FILE (a reference-format JSON)")
     if args.preset is not None:
         return args.preset, stori_jax.preset(args.game, args.preset)
-    with open(args.config) as f:
-        return Path(args.config).stem, stori_jax.Config.from_reference(json.load(f),
-                                                                         game=args.game)
+    path = Path(args.config)
+    if not path.is_file():
+        raise ValueError(f"--config {path}: " + ("is a directory, not a JSON file"
+                                                 if path.is_dir() else "no such file"))
+    try:
+        reference = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise ValueError(f"--config {path} is not valid JSON: {e}") from None
+    if not isinstance(reference, dict):
+        raise ValueError(f"--config {path} must hold a JSON object (a reference-format "
+                         f"config), got {type(reference).__name__}")
+    return path.stem, stori_jax.Config.from_reference(reference, game=args.game)
+
+
+def _check_show_record(args, steps_flag: str, steps: int) -> None:
+    check_min(steps_flag, steps, 1)
+    check_min("--seed", args.seed, 0)
+    if args.out is not None:
+        check_out("--out", args.out, directory=False)
 
 
 def _cmd_show(args) -> int:
     from stori_jax.visual import contact_sheet
 
+    _check_show_record(args, "--steps", args.steps)
     name, config = _config_for(args)
     out = args.out or Path(f"{args.game}-{name}.png")
     print(f"wrote {contact_sheet(args.game, name, config, out, steps=args.steps, seed=args.seed)}")
@@ -118,9 +166,10 @@ def _cmd_show(args) -> int:
 def _cmd_record(args) -> int:
     from stori_jax.visual import record_episode
 
-    name, config = _config_for(args)
     if args.episodes != 1:
         raise ValueError(f"--episodes: recording supports 1 episode per file, got {args.episodes}")
+    _check_show_record(args, "--max-steps", args.max_steps)
+    name, config = _config_for(args)
     out = args.out or Path(f"{args.game}-{name}.gif")
     path = record_episode(args.game, name, config, out, max_steps=args.max_steps, seed=args.seed)
     print(f"wrote {path}")
@@ -196,10 +245,9 @@ def main(argv: list[str] | None = None) -> int:
             from baselines.commands import COMMANDS
 
             return COMMANDS[args.command](args)
-        if args.steps < 1:
-            raise ValueError(f"--steps must be >= 1, got {args.steps}")
+        check_min("--steps", args.steps, 1)
         return _cmd_run(args)
-    except ValueError as e:
+    except (ValueError, OSError) as e:  # bad input, or a path that cannot be read or written
         print(f"stori-jax: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -1,0 +1,128 @@
+"""Bad command-line input: a one-line error naming the argument (exit status 2), found before
+any work starts; never a traceback, never silently ignored."""
+
+import json
+import pickle
+
+import pytest
+
+from baselines.ppo import load_checkpoint
+from stori_jax.cli import main
+
+EVAL = dict(game="Breakout", preset="3.1", agent="random", policy="random", train_seed=0,
+            mean_return=1.0, episodes=1)
+
+
+@pytest.fixture
+def files(tmp_path):
+    """Bad inputs of every kind, by name, in ``tmp_path``."""
+    (tmp_path / "afile").write_text("")
+    (tmp_path / "adir").mkdir()
+    (tmp_path / "bad.json").write_text("{not json")
+    (tmp_path / "list.json").write_text("[1, 2]")
+    (tmp_path / "empty.pkl").write_bytes(b"")
+    (tmp_path / "text.pkl").write_text("garbage\n")
+    (tmp_path / "list.pkl").write_bytes(pickle.dumps([1, 2]))
+    (tmp_path / "nocfg.pkl").write_bytes(pickle.dumps(dict(format="stori-jax-ppo-1",
+                                                           params={})))
+    (tmp_path / "badcfg.pkl").write_bytes(pickle.dumps(dict(
+        format="stori-jax-ppo-1", params={}, config=dict(game="Breakout", gamma=2.0))))
+    for name, content in (("num", 5), ("list", [1]), ("types", dict(EVAL, mean_return="abc")),
+                          ("seed", dict(EVAL, train_seed=-1)), ("dqn", dict(EVAL, agent="dqn")),
+                          ("mixed", dict(EVAL, policy="greedy"))):
+        (tmp_path / f"tb_{name}").mkdir()
+        (tmp_path / f"tb_{name}" / "eval-x.json").write_text(json.dumps(content))
+    run = tmp_path / "tb_curve" / "run"
+    run.mkdir(parents=True)
+    (tmp_path / "tb_curve" / "eval-random.json").write_text(json.dumps(EVAL))
+    (run / "config.json").write_text(json.dumps(dict(game="Breakout", preset="3.1", seed=0)))
+    (run / "episodes.csv").write_text("a,b\n1,2\n")
+    return tmp_path
+
+
+def run_main(argv, files, capsys):
+    status = main([a.replace("D/", f"{files}/") for a in argv])
+    err = capsys.readouterr().err.replace(f"{files}/", "D/")
+    assert status == 2 and len(err.strip().splitlines()) == 1, err
+    return err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["show", "Breakout"], "give a PRESET (e.g. 3.1"),
+    (["record", "Breakout"], "or --config FILE"),
+    (["show", "Breakout", "3.1", "--config", "D/bad.json"], "not both"),
+    (["show", "Breakout", "--config", "D/missing.json"], "--config D/missing.json: no such file"),
+    (["record", "Breakout", "--config", "D/adir"], "--config D/adir: is a directory"),
+    (["show", "Breakout", "--config", "D/bad.json"], "--config D/bad.json is not valid JSON"),
+    (["show", "Breakout", "--config", "D/list.json"], "must hold a JSON object"),
+])
+def test_config_file_errors_name_the_file(argv, message, files, capsys):
+    assert message in run_main(argv, files, capsys)
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["suite", "--out", "D/afile"], "--out D/afile exists and is not a directory"),
+    (["show", "Breakout", "3.1", "--out", "D/afile/x.png"], "D/afile is a file, not a directory"),
+    (["show", "Breakout", "3.1", "--out", "D/adir"], "--out D/adir exists and is not a file"),
+    (["table", "D/tb_curve", "--out", "D/afile"], "--out D/afile exists and is not a directory"),
+    (["eval", "--random", "--game", "Breakout", "--preset", "3.1", "--out", "D/afile/sub"],
+     "D/afile is a file, not a directory"),
+    (["train", "ppo", "--game", "Breakout", "--out", "D/afile"], "--out D/afile exists"),
+])
+def test_unusable_out_paths_are_refused_up_front(argv, message, files, capsys):
+    assert message in run_main(argv, files, capsys)
+
+
+@pytest.mark.parametrize("name, why", [
+    ("empty.pkl", "unreadable: EOFError"),
+    ("bad.json", "unreadable: UnpicklingError"),
+    ("text.pkl", "unreadable: ValueError"),
+    ("list.pkl", "no format 'stori-jax-ppo-1' marker"),
+    ("nocfg.pkl", "lacks ['config']"),
+    ("badcfg.pkl", "bad config: gamma must be in [0, 1]"),
+    ("adir", "a directory; give the checkpoint.pkl in it"),
+])
+def test_corrupt_checkpoints_say_why(name, why, files, capsys):
+    err = run_main(["eval", "--checkpoint", f"D/{name}"], files, capsys)
+    assert f"not a stori-jax PPO checkpoint: D/{name} ({why}" in err
+    with pytest.raises(ValueError, match="not a stori-jax PPO checkpoint"):
+        load_checkpoint(files / name)
+
+
+@pytest.mark.parametrize("tree, message", [
+    ("tb_num", "eval-x.json must hold a JSON object (a stori-jax evaluation), got int"),
+    ("tb_list", "got list"),
+    ("tb_types", "eval-x.json: mean_return must be a finite number, got 'abc'"),
+    ("tb_seed", "train_seed must be an int >= 0, got -1"),
+    ("tb_dqn", "agent must be one of ['ppo', 'random'], got 'dqn'"),
+    ("tb_mixed", "policy 'greedy' does not go with agent 'random'"),
+    ("tb_curve", "run/episodes.csv lacks the columns ['global_step', 'return']"),
+])
+def test_malformed_results_are_named(tree, message, files, capsys):
+    err = run_main(["table", f"D/{tree}", "--out", "D/tables"], files, capsys)
+    assert f"D/{tree}/" in err and message in err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["suite", "--presets", "3.1", "9"], "--presets: unknown ['9']; allowed: ['1', '2.1'"),
+    (["suite", "--games", "Gopher", "--presets", "3.2A"],
+     "--presets: unknown ['3.2A']; allowed for Gopher: ['1', '2.1', '2.2', '3.1', '3.2']"),
+    (["suite", "--seed", "-1"], "--seed must be >= 0, got -1"),
+    (["eval", "--random", "--game", "Breakout", "--preset", "3.1", "--policy", "greedy"],
+     "--policy applies to checkpoints only"),
+    (["eval", "--random", "--game", "Breakout", "--preset", "3.1", "--seed", "-1"],
+     "--seed must be >= 0, got -1"),
+    (["eval", "--random", "--game", "Breakout", "--preset", "3.1", "--eval-seed", "-2"],
+     "--eval-seed must be >= 0, got -2"),
+    (["show", "Breakout", "3.1", "--steps", "-5"], "--steps must be >= 1, got -5"),
+    (["show", "Breakout", "3.1", "--seed", "-1"], "--seed must be >= 0, got -1"),
+    (["record", "Breakout", "3.1", "--max-steps", "0"], "--max-steps must be >= 1, got 0"),
+    (["train", "ppo", "--game", "Breakout", "--set", "learning_rate=inf"],
+     "learning_rate must be a finite number >= 0, got inf"),
+    (["train", "ppo", "--game", "Breakout", "--set", "ent_coef=nan"],
+     "ent_coef must be a finite number >= 0, got nan"),
+    (["train", "ppo", "--game", "Breakout", "--set", "network=tiny", "--set", "network=nips"],
+     "--set network given twice ('tiny' and 'nips')"),
+])
+def test_out_of_range_and_ignored_flags_are_refused(argv, message, files, capsys):
+    assert message in run_main(argv, files, capsys)
