@@ -6,6 +6,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from baselines.evaluate import EVAL_NUM_ENVS
+
 
 def add_parsers(sub) -> None:
     train = sub.add_parser("train", help="train a baseline agent on a preset (PPO)")
@@ -39,7 +41,9 @@ def add_parsers(sub) -> None:
                     help="how a checkpoint acts (default sampled)")
     ev.add_argument("--eval-seed", type=int, default=None,
                     help="environment seed of the evaluation (default: training seed + 10000)")
-    ev.add_argument("--num-envs", type=int, default=16)
+    ev.add_argument("--num-envs", type=int, default=EVAL_NUM_ENVS,
+                    help=f"envs the episodes are split over (default {EVAL_NUM_ENVS}, as the "
+                         "recorded evaluations)")
     ev.add_argument("--out", type=Path, default=None,
                     help="directory for eval-<policy>.json (default: the checkpoint's, or "
                          "results/train/<game>-<preset>/random-seed<S>)")

@@ -14,11 +14,11 @@ import json
 import time
 from pathlib import Path
 
-import jax
 import numpy as np
 
 POLICIES = ("sampled", "greedy", "random")
 EVAL_SEED_OFFSET = 10_000  # evaluation seed = training seed + this, unless given
+EVAL_NUM_ENVS = 20  # envs of an evaluation (the recorded evaluations used this many)
 
 
 def episode_quotas(episodes: int, num_envs: int) -> np.ndarray:
@@ -27,9 +27,10 @@ def episode_quotas(episodes: int, num_envs: int) -> np.ndarray:
 
 
 def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: int = 0,
-             eval_seed: int | None = None, num_envs: int = 16, checkpoint: Path | None = None,
+             eval_seed: int | None = None, num_envs: int = EVAL_NUM_ENVS, checkpoint: Path | None = None,
              max_episode_frames: int = 108_000, progress: bool = True) -> dict:
     """Play ``episodes`` episodes; returns a dict with every return and their mean and std."""
+    import jax
     import stori_jax
     from tqdm import tqdm
 

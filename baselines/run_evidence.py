@@ -60,12 +60,12 @@ def stage_train(runs=RUNS, seeds=SEEDS) -> None:
                   f"{summary['env_only_sps']:.0f} env-only SPS", flush=True)
 
 
-EVAL_EPISODES, EVAL_ENVS = 100, 20
+EVAL_EPISODES = 100
 
 
 def stage_eval(runs=RUNS, seeds=SEEDS) -> None:
     """Sampled-policy evaluation of every PPO run, and the random policy, same protocol."""
-    from baselines.evaluate import evaluate, write_result
+    from baselines.evaluate import EVAL_NUM_ENVS, evaluate, write_result
 
     for seed in seeds:
         for game, preset in runs:
@@ -77,7 +77,7 @@ def stage_eval(runs=RUNS, seeds=SEEDS) -> None:
                         checkpoint is not None and not checkpoint.exists()):
                     continue
                 result = evaluate(game, preset, policy=policy, episodes=EVAL_EPISODES,
-                                  seed=seed, num_envs=EVAL_ENVS, checkpoint=checkpoint)
+                                  seed=seed, num_envs=EVAL_NUM_ENVS, checkpoint=checkpoint)
                 if checkpoint is not None:  # file the checkpoint as the repository names it
                     result["checkpoint"] = str(checkpoint.relative_to(RESULTS))
                 write_result(result, out)

@@ -1,6 +1,6 @@
 """Throughput of stori-jax next to the emulator limit and its peers, in ONE run on one machine.
 
-    python benchmarks/throughput.py            # everything (about 15 minutes on 2 cores)
+    python benchmarks/throughput.py            # everything (about 18 minutes on 2 cores)
     python benchmarks/throughput.py --quick    # Breakout only, fewer sizes (about 3 minutes)
 
 Measured (agent steps per second, frame skip 4, summed over the batch):
