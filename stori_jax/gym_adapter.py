@@ -34,6 +34,18 @@ class _Owner:
     def _init_env(self, game, preset, num_envs, seed, make_kwargs):
         import stori_jax
 
+        registered = make_kwargs.pop("registered_as", None)
+        if registered is not None and (game, preset) != registered:
+            raise ValueError(f"this id is {env_id(*registered)}: it fixes game and preset, got "
+                             f"game={game!r} preset={preset!r}; use that preset's own id")
+        if make_kwargs.pop("render_mode", None) is not None:
+            raise ValueError("render_mode: stori_jax envs do not render (render_modes []); "
+                             "use `stori-jax record` for videos")
+        for name in ("num_envs", "autoreset"):
+            if name in make_kwargs:
+                raise ValueError(f"{name} is set by the gymnasium adapter (one env without "
+                                 "autoreset; gymnasium.make_vec(id, num_envs=N) for a batch "
+                                 f"with next-step autoreset), got {name}={make_kwargs[name]!r}")
         self._make = lambda s: stori_jax.make(game, preset, num_envs=num_envs, seed=s,
                                               autoreset=False, **make_kwargs)
         self._seed = 0 if seed is None else seed
@@ -117,4 +129,4 @@ def register_all() -> None:
             continue
         gym.register(id=gid, entry_point="stori_jax.gym_adapter:StoriGymEnv",
                      vector_entry_point="stori_jax.gym_adapter:StoriVectorEnv",
-                     kwargs={"game": game, "preset": preset})
+                     kwargs={"game": game, "preset": preset, "registered_as": (game, preset)})

@@ -73,3 +73,21 @@ def test_vector_env_next_step_autoreset():
         assert done_at is not None, "no Breakout episode ended under random play"
     finally:
         envs.close()
+
+
+@pytest.mark.parametrize("kwargs,pattern", [
+    (dict(game="Boxing"), r"fixes game and preset, got game='Boxing' preset='2\.1'"),
+    (dict(preset="1"), r"fixes game and preset, got game='Breakout' preset='1'"),
+    (dict(num_envs=4), r"num_envs is set by the gymnasium adapter.*make_vec.*got num_envs=4"),
+    (dict(autoreset=True), r"autoreset is set by the gymnasium adapter.*got autoreset=True"),
+    (dict(render_mode="rgb_array"), r"render_mode: stori_jax envs do not render"),
+])
+def test_kwargs_that_would_contradict_the_id_are_refused(kwargs, pattern):
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # gymnasium's own render_mode warning
+        with pytest.raises(ValueError, match=pattern):
+            gym.make("stori_jax/Breakout-2.1-v0", **kwargs)
+    with pytest.raises(ValueError, match=r"fixes game and preset"):
+        gym.make_vec("stori_jax/Breakout-2.1-v0", num_envs=2, game="Boxing")
