@@ -93,6 +93,10 @@ class PPOConfig:
             minimum = 0 if name in ("seed", "augment_shift") else 1
             if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
                 raise ValueError(f"{name} must be an int >= {minimum}, got {value!r}")
+        from stori_jax.env import MAX_SEED
+
+        if self.seed > (MAX_SEED - 1) // 2:  # the two halves' envs use seeds 2*seed, 2*seed+1
+            raise ValueError(f"seed must be in [0, {(MAX_SEED - 1) // 2}], got {self.seed}")
         if self.num_envs % 2:
             raise ValueError(f"num_envs must be even (two halves stepped in turn), "
                              f"got {self.num_envs}")

@@ -136,6 +136,12 @@ def test_augment_shift_must_be_a_non_negative_int():
         tiny(augment_shift=-1)
 
 
+def test_seed_must_leave_room_for_both_halves_env_seeds():
+    assert tiny(seed=2**30 - 1).seed == 2**30 - 1  # its second half's envs use seed 2**31 - 1
+    with pytest.raises(ValueError, match=r"seed must be in \[0, 1073741823\], got 1073741824"):
+        tiny(seed=2**30)
+
+
 def test_gae_by_hand():
     rollout = ppo.Rollout(obs=None, action=None, logp=None,
                           value=jnp.array([[0.5], [1.0]]), reward=jnp.array([[1.0], [0.0]]),
