@@ -3,6 +3,7 @@ collection, Ctrl-C, and the error messages of bad arguments and actions."""
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import os
 import signal
@@ -353,25 +354,36 @@ def test_workers_outlive_the_thread_that_made_the_env():
         env.close()
 
 
+@contextlib.contextmanager
+def interrupting(owner, method: str):
+    """``owner.method`` raises KeyboardInterrupt (a Ctrl-C landing there) inside the block."""
+    def interrupted(*args):
+        raise KeyboardInterrupt
+
+    real = getattr(owner, method)
+    setattr(owner, method, interrupted)
+    try:
+        yield
+    finally:
+        setattr(owner, method, real)
+
+
+def assert_points_to_reset(env):
+    with pytest.raises(RuntimeError, match=r"call reset\(\) first"):
+        env.step([0, 1])
+    with pytest.raises(RuntimeError, match=r"needs reset\(\)"):
+        env.recv()
+
+
 def test_an_interrupt_after_the_emulators_finished_requires_a_reset():
     """Ctrl-C between the workers' reply and the env's own bookkeeping: the emulators are a step
     ahead of the env's state, so the env must refuse to step on (not silently diverge)."""
     env = make("Breakout")
     try:
         env.reset()
-        real_finish = env._finish
-
-        def interrupted(*args):
-            raise KeyboardInterrupt
-
-        env._finish = interrupted
-        with pytest.raises(KeyboardInterrupt):
+        with interrupting(env, "_finish"), pytest.raises(KeyboardInterrupt):
             env.step([0, 1])
-        env._finish = real_finish
-        with pytest.raises(RuntimeError, match=r"call reset\(\) first"):
-            env.step([0, 1])
-        with pytest.raises(RuntimeError, match=r"needs reset\(\)"):
-            env.recv()
+        assert_points_to_reset(env)
         env.reset()
         obs, *_ = env.step([0, 1])
         assert obs.shape == (2, 128)
@@ -384,20 +396,10 @@ def test_an_interrupted_reset_says_reset_again():
     second reset() gives the same first observation as an uninterrupted one."""
     env, twin = make("Breakout"), make("Breakout")
     try:
-        real_recv = env.backend.recv
-
-        def interrupted():
-            raise KeyboardInterrupt
-
-        env.backend.recv = interrupted
-        with pytest.raises(KeyboardInterrupt):
+        with interrupting(env.backend, "recv"), pytest.raises(KeyboardInterrupt):
             env.reset()
-        env.backend.recv = real_recv
         assert env.backend.pending
-        with pytest.raises(RuntimeError, match=r"call reset\(\) first"):
-            env.step([0, 1])
-        with pytest.raises(RuntimeError, match=r"needs reset\(\)"):
-            env.recv()
+        assert_points_to_reset(env)
         with pytest.raises(RuntimeError, match=r"reset\(\) it"):
             env.snapshot()
         obs, _ = env.reset()
