@@ -423,6 +423,9 @@ def make_update(network, optimizer, config: PPOConfig):
 
 # -- checkpoints ----------------------------------------------------------------------------------
 
+# what a checkpoint holds beyond its format, config and params, for a run to continue from it
+RESUME_STATE = ("iteration", "opt_state", "key", "obs", "envs", "elapsed_s")
+
 def save_checkpoint(path: Path, payload: dict) -> None:
     """Atomically write ``payload`` (params, optimizer state, keys, env snapshots, ...)."""
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -508,6 +511,10 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
                 raise ValueError(f"--resume: {ckpt_path} was trained with a different config:"
                                  f"\n  checkpoint: {ckpt['config']}\n  now: "
                                  f"{dataclasses.asdict(config)}")
+            missing = [k for k in RESUME_STATE if k not in ckpt]
+            if missing:
+                raise ValueError(f"--resume: {ckpt_path} lacks {missing}, which a run needs to "
+                                 "continue")
             params, opt_state = ckpt["params"], ckpt["opt_state"]
             key, start, obs = ckpt["key"], ckpt["iteration"], list(ckpt["obs"])
             for env, snap in zip(envs, ckpt["envs"]):

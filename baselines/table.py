@@ -204,17 +204,17 @@ def smoothed(steps: np.ndarray, returns: np.ndarray, grid: np.ndarray, window: i
     return out
 
 
-def plot_curves(results_dir: Path, out_dir: Path, window: int = 20) -> list[Path]:
-    """One PNG per game: a panel per preset, each seed's smoothed curve and their mean, with the
-    random policy's evaluation mean as a dashed line where one exists."""
+def plot_curves(curves: dict, evaluations: list[dict], out_dir: Path,
+                window: int = 20) -> list[Path]:
+    """One PNG per game of ``learning_curves``: a panel per preset, each seed's smoothed curve
+    and their mean, with the random policy's evaluation mean as a dashed line where one exists."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    curves = learning_curves(results_dir)
     random_means = defaultdict(list)
-    for e in load_evaluations(results_dir):
+    for e in evaluations:
         if e["agent"] == "random":
             random_means[(e["game"], e["preset"])].append(e["mean_return"])
     written = []
@@ -258,11 +258,13 @@ def build_table(results_dir: Path, out_dir: Path | None = None,
     ``results_dir``); returns (the markdown, the paths written)."""
     results_dir = Path(results_dir)
     out_dir = Path(out_dir) if out_dir is not None else results_dir
-    rows = aggregate(load_evaluations(results_dir), ppo_policy)
+    evaluations = load_evaluations(results_dir)
+    curves = learning_curves(results_dir)  # read (and checked) before anything is written
+    rows = aggregate(evaluations, ppo_policy)
     text = markdown(rows)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "table.md").write_text(text)
     (out_dir / "table.json").write_text(json.dumps(dict(ppo_policy=ppo_policy, rows=rows),
                                                    indent=1))
-    return text, [out_dir / "table.md", out_dir / "table.json", *plot_curves(results_dir,
-                                                                                out_dir)]
+    return text, [out_dir / "table.md", out_dir / "table.json",
+                  *plot_curves(curves, evaluations, out_dir)]

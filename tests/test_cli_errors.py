@@ -101,6 +101,27 @@ def test_corrupt_checkpoints_say_why(name, why, files, capsys):
 def test_malformed_results_are_named(tree, message, files, capsys):
     err = run_main(["table", f"D/{tree}", "--out", "D/tables"], files, capsys)
     assert f"D/{tree}/" in err and message in err
+    assert not (files / "tables" / "table.md").exists(), "found before anything is written"
+
+
+def test_resume_from_a_checkpoint_without_its_run_state_says_what_is_missing(files, capsys):
+    import dataclasses
+
+    from baselines.ppo import PPOConfig
+
+    config = PPOConfig(network="tiny", num_envs=2, num_steps=8, num_minibatches=2,
+                       total_steps=16)
+    run = files / "run"
+    run.mkdir()
+    (run / "checkpoint.pkl").write_bytes(pickle.dumps(dict(
+        format="stori-jax-ppo-1", config=dataclasses.asdict(config), params={})))
+    argv = ["train", "ppo", "--game", "Breakout", "--preset", "3.1", "--steps", "16",
+            "--resume", "--out", "D/run"] + [
+        a for name in ("network", "num_envs", "num_steps", "num_minibatches")
+        for a in ("--set", f"{name}={getattr(config, name)}")]
+    err = run_main(argv, files, capsys)
+    assert "--resume: D/run/checkpoint.pkl lacks ['iteration', 'opt_state', 'key', 'obs', " \
+           "'envs', 'elapsed_s']" in err
 
 
 @pytest.mark.parametrize("argv, message", [
