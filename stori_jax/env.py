@@ -302,13 +302,11 @@ class Env:
             done = (out["terminated"] | out["truncated"]).astype(bool)
             new_episode = was_reset | (done if self.plan.autoreset else False)
             result = self._finish(state, draws, out, new_episode, was_reset)
-        except InterruptedStepError:
-            self._in_flight, self._needs_reset = None, True
-            raise
         except BaseException:
             # interrupted (Ctrl-C) while waiting: the step stays in flight and the next recv()
-            # resumes it.  Interrupted after the emulators finished: they are a step ahead of
-            # this env's state, so it needs a reset rather than silently diverging.
+            # resumes it.  Interrupted inside this process's emulation (InterruptedStepError) or
+            # after the emulators finished: they are ahead of this env's state, so it needs a
+            # reset rather than silently diverging.
             if not getattr(self.backend, "pending", False):
                 self._in_flight, self._needs_reset = None, True
             raise
