@@ -81,9 +81,10 @@ DEFAULT_ROOT = Path("results") / "train"
 def cmd_train(args) -> int:
     from baselines.evaluate import evaluate, write_result
     from baselines.ppo import PPOConfig, train
-    from stori_jax.cli import check_min, check_out
+    from stori_jax.checks import check_int
+    from stori_jax.cli import check_out
 
-    check_min("--eval-episodes", args.eval_episodes, 0)
+    check_int("--eval-episodes", args.eval_episodes, 0)
     overrides = _parse_overrides(args.overrides)
     for flag, field in (("--game", "game"), ("--preset", "preset"), ("--seed", "seed"),
                         ("--steps", "total_steps")):
@@ -119,7 +120,8 @@ def cmd_train(args) -> int:
 def cmd_eval(args) -> int:
     from baselines.evaluate import evaluate, write_result
     from baselines.ppo import load_checkpoint
-    from stori_jax.cli import check_min, check_out
+    from stori_jax.checks import check_int
+    from stori_jax.cli import check_out
 
     if args.random == (args.checkpoint is not None):
         raise ValueError("give either --checkpoint PATH or --random (with --game and --preset)")
@@ -127,7 +129,7 @@ def cmd_eval(args) -> int:
                                  ("--episodes", args.episodes, 1),
                                  ("--num-envs", args.num_envs, 1)):
         if value is not None:
-            check_min(flag, value, minimum)
+            check_int(flag, value, minimum)
     if args.random:
         if args.game is None or args.preset is None:
             raise ValueError("--random needs --game and --preset")

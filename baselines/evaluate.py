@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from stori_jax.checks import check_int
+
 POLICIES = ("sampled", "greedy", "random")
 EVAL_SEED_OFFSET = 10_000  # evaluation seed = training seed + this, unless given
 EVAL_NUM_ENVS = 20  # envs of an evaluation (the recorded evaluations used this many)
@@ -39,9 +41,7 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
     if (policy == "random") != (checkpoint is None):
         raise ValueError("give a checkpoint for the 'sampled' and 'greedy' policies, and none "
                          "for 'random'")
-    from stori_jax.env import _check_int
-
-    episodes, num_envs = _check_int("episodes", episodes, 1), _check_int("num_envs", num_envs, 1)
+    episodes, num_envs = check_int("episodes", episodes, 1), check_int("num_envs", num_envs, 1)
     eval_seed = seed + EVAL_SEED_OFFSET if eval_seed is None else eval_seed
     num_envs = min(num_envs, episodes)
     if checkpoint is not None:

@@ -14,7 +14,6 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
-import math
 import os
 import pickle
 import time
@@ -27,6 +26,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
+
+from stori_jax.checks import check_int, check_real
 
 NETWORKS = ("nature", "nips", "tiny")
 ACTION_HEADS = ("joint", "factored")
@@ -89,10 +90,15 @@ class PPOConfig:
         stori_jax.preset(self.game, self.preset)  # unknown game or preset: a clear ValueError
         for name in ("seed", "total_steps", "num_envs", "num_steps", "num_minibatches",
                      "update_epochs", "checkpoint_every", "augment_shift"):
-            value = getattr(self, name)
             minimum = 0 if name in ("seed", "augment_shift") else 1
-            if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-                raise ValueError(f"{name} must be an int >= {minimum}, got {value!r}")
+            object.__setattr__(self, name, check_int(name, getattr(self, name), minimum))
+        for name in ("gamma", "gae_lambda"):
+            object.__setattr__(self, name, check_real(name, getattr(self, name), 0, 1))
+        for name in ("learning_rate", "clip_coef", "ent_coef", "vf_coef", "max_grad_norm"):
+            object.__setattr__(self, name, check_real(name, getattr(self, name), 0))
+        for name in ("anneal_lr", "clip_vloss"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
         from stori_jax.env import MAX_SEED
 
         if self.seed > (MAX_SEED - 1) // 2:  # the two halves' envs use seeds 2*seed, 2*seed+1
@@ -113,13 +119,6 @@ class PPOConfig:
             raise ValueError(f"action_head='factored' needs a game that plays ALE's full "
                              f"{len(FULL_ACTION_SET)} actions (e.g. Boxing, BankHeist); "
                              f"{self.game} has {num_actions}: use action_head='joint'")
-        for name in ("gamma", "gae_lambda"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
-        for name in ("learning_rate", "clip_coef", "ent_coef", "vf_coef", "max_grad_norm"):
-            if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0.0):
-                raise ValueError(f"{name} must be a finite number >= 0, got "
-                                 f"{getattr(self, name)}")
 
     @classmethod
     def from_recorded(cls, recorded: dict) -> "PPOConfig":

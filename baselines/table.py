@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 import warnings
 from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
+
+from stori_jax.checks import check_int, check_real
 
 # STORI_SPEC section 11: mean evaluation return ± std over seeds 0, 7, 13 at 100k agent steps
 PAPER_RESULTS = {  # (game, preset): (DreamerV3 mean, std, STORM mean, std)
@@ -59,14 +60,9 @@ def _read_json_object(path: Path, what: str) -> dict:
     return value
 
 
-def _is_int(value, minimum: int) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool) and value >= minimum
-
-
 def _check_evaluation(path: Path, result: dict) -> None:
     """A clear ValueError if ``result`` is not what ``stori-jax eval`` writes."""
     from baselines.evaluate import POLICIES
-
     missing = [k for k in EVAL_KEYS if k not in result]
     if missing:
         raise ValueError(f"{path} lacks {missing}: not a stori-jax evaluation")
@@ -79,12 +75,9 @@ def _check_evaluation(path: Path, result: dict) -> None:
             result["policy"] == "random"):
         raise ValueError(f"{path}: policy {result['policy']!r} does not go with agent "
                          f"{result['agent']!r} (random: 'random'; ppo: 'sampled' or 'greedy')")
-    for key, minimum in (("train_seed", 0), ("episodes", 1)):
-        if not _is_int(result[key], minimum):
-            raise ValueError(f"{path}: {key} must be an int >= {minimum}, got {result[key]!r}")
-    mean = result["mean_return"]
-    if isinstance(mean, bool) or not isinstance(mean, (int, float)) or not math.isfinite(mean):
-        raise ValueError(f"{path}: mean_return must be a finite number, got {mean!r}")
+    check_int(f"{path}: train_seed", result["train_seed"], 0)
+    check_int(f"{path}: episodes", result["episodes"], 1)
+    check_real(f"{path}: mean_return", result["mean_return"])
 
 
 def load_evaluations(results_dir: Path) -> list[dict]:

@@ -8,6 +8,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from stori_jax.checks import check_int
+
 
 def _cmd_list(args) -> int:
     from stori_jax import STORI_GAMES, describe_preset, get_game, list_presets
@@ -72,11 +74,6 @@ def check_out(flag: str, path: Path, *, directory: bool) -> None:
             return
 
 
-def check_min(flag: str, value: int, minimum: int) -> None:
-    if value < minimum:
-        raise ValueError(f"{flag} must be >= {minimum}, got {value}")
-
-
 def _selected_presets(games, presets):
     from stori_jax import list_presets
     from stori_jax.presets import preset as check_preset
@@ -101,8 +98,8 @@ def _cmd_suite(args) -> int:
 
     for name, value in (("--episodes", args.episodes), ("--num-envs", args.num_envs),
                         ("--max-steps", args.max_steps)):
-        check_min(name, value, 1)
-    check_min("--seed", args.seed, 0)
+        check_int(name, value, 1)
+    check_int("--seed", args.seed, 0)
     if args.out is not None:
         check_out("--out", args.out, directory=True)
     games = args.games
@@ -147,8 +144,8 @@ def _config_for(args):
 
 
 def _check_show_record(args, steps_flag: str, steps: int) -> None:
-    check_min(steps_flag, steps, 1)
-    check_min("--seed", args.seed, 0)
+    check_int(steps_flag, steps, 1)
+    check_int("--seed", args.seed, 0)
     if args.out is not None:
         check_out("--out", args.out, directory=False)
 
@@ -245,7 +242,7 @@ def main(argv: list[str] | None = None) -> int:
             from baselines.commands import COMMANDS
 
             return COMMANDS[args.command](args)
-        check_min("--steps", args.steps, 1)
+        check_int("--steps", args.steps, 1)
         return _cmd_run(args)
     except (ValueError, OSError) as e:  # bad input, or a path that cannot be read or written
         print(f"stori-jax: error: {e}", file=sys.stderr)

@@ -21,30 +21,14 @@ import numbers
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
+from .checks import check_int, check_probability
+
 GRANULARITIES = ("frame", "step")
 DRIFT_SCHEDULES = ("sudden", "cyclic", "gradual")
 MASK_KINDS = ("crop", "blackout", "ram")
 CROP_MODES = (1, 2, 3, 4, 5)  # 0 ("none") is expressed by leaving the mask out
 TAXONOMY_TYPES = ("0", "1", "2.1", "2.2", "3.1", "3.2")
 SECONDARY_TYPES = ("1", "2.1", "3.2")
-
-
-def _check_probability(owner: str, name: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ValueError(f"{owner}.{name} must be a number in [0, 1], got {value!r}")
-    try:
-        value = float(value)
-    except OverflowError:
-        raise ValueError(f"{owner}.{name} must be in [0, 1], got {value!r}") from None
-    if not 0.0 <= value <= 1.0:
-        raise ValueError(f"{owner}.{name} must be in [0, 1], got {value}")
-    return value
-
-
-def _check_int(owner: str, name: str, value: Any) -> int:
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise ValueError(f"{owner}.{name} must be an int, got {value!r}")
-    return int(value)
 
 
 def _check_choice(owner: str, name: str, value: Any, allowed) -> Any:
@@ -67,7 +51,7 @@ class ActionNoise:
     sticky: bool = False
 
     def __post_init__(self):
-        object.__setattr__(self, "prob", _check_probability("ActionNoise", "prob", self.prob))
+        object.__setattr__(self, "prob", check_probability("ActionNoise.prob", self.prob))
         if not isinstance(self.sticky, bool):
             raise ValueError(f"ActionNoise.sticky must be True or False, got {self.sticky!r}")
         if self.replacement_actions is not None:
@@ -94,11 +78,11 @@ class RandomEvent:
     prob: float
 
     def __post_init__(self):
-        mode = _check_int("RandomEvent", "mode", self.mode)
+        mode = check_int("RandomEvent.mode", self.mode)
         object.__setattr__(self, "mode", mode)
         if mode < 1:
             raise ValueError(f"RandomEvent.mode must be >= 1 (a game's event modes), got {mode}")
-        object.__setattr__(self, "prob", _check_probability("RandomEvent", "prob", self.prob))
+        object.__setattr__(self, "prob", check_probability("RandomEvent.prob", self.prob))
 
 
 @dataclass(frozen=True)
@@ -116,13 +100,13 @@ class ObservationMask:
 
     def __post_init__(self):
         _check_choice("ObservationMask", "kind", self.kind, MASK_KINDS)
-        mode = _check_int("ObservationMask", "mode", self.mode)
+        mode = check_int("ObservationMask.mode", self.mode)
         object.__setattr__(self, "mode", mode)
         if self.kind == "crop":
             _check_choice("ObservationMask", "mode (crop)", mode, CROP_MODES)
         elif mode < 1:
             raise ValueError(f"ObservationMask.mode must be >= 1 for kind {self.kind!r}, got {mode}")
-        object.__setattr__(self, "prob", _check_probability("ObservationMask", "prob", self.prob))
+        object.__setattr__(self, "prob", check_probability("ObservationMask.prob", self.prob))
 
 
 @dataclass(frozen=True)
@@ -141,7 +125,7 @@ class ConceptDrift:
 
     def __post_init__(self):
         _check_choice("ConceptDrift", "schedule", self.schedule, DRIFT_SCHEDULES)
-        period = _check_int("ConceptDrift", "period", self.period)
+        period = check_int("ConceptDrift.period", self.period)
         object.__setattr__(self, "period", period)
         if period < 1:
             raise ValueError(f"ConceptDrift.period (T) must be >= 1 agent step, got {period}")

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import numbers
 
 import gymnasium as gym
 import jax
@@ -12,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from stori_jax.backends.subproc import EnvClosedError, InterruptedStepError, SubprocBackend
+from stori_jax.checks import check_int, check_real
 from stori_jax.config import Config, GRANULARITIES
 from stori_jax.core import (Draws, EnvState, WorkerOutputs, after_step, before_step,
                             initial_state, push_frames)
@@ -30,16 +30,6 @@ def emulator_seeds(seed: int, num_envs: int) -> list[int]:
 
 # seeds feed 32-bit JAX keys and envpool's int32 seed: larger ones would alias smaller ones
 MAX_SEED = 2**31 - 1
-
-
-def _check_int(name: str, value, minimum: int, maximum: int | None = None) -> int:
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise ValueError(f"{name} must be an int >= {minimum}, got {value!r}")
-    if value < minimum:
-        raise ValueError(f"{name} must be >= {minimum}, got {value}")
-    if maximum is not None and value > maximum:
-        raise ValueError(f"{name} must be in [{minimum}, {maximum}], got {value}")
-    return int(value)
 
 
 def resolve_config(game: str, preset: str | None, config: Config | None) -> Config:
@@ -82,13 +72,13 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
             raise ValueError(f"granularity must be one of {list(GRANULARITIES)} or None, "
                              f"got {granularity!r}")
         cfg = cfg.replace(granularity=granularity)
-    num_envs = _check_int("num_envs", num_envs, 1)
-    seed = _check_int("seed", seed, 0, MAX_SEED)
+    num_envs = check_int("num_envs", num_envs, 1)
+    seed = check_int("seed", seed, 0, MAX_SEED)
     if not isinstance(autoreset, (bool, np.bool_)):
         raise ValueError(f"autoreset must be True or False, got {autoreset!r}")
-    frame_skip = _check_int("frame_skip", frame_skip, 1)
-    max_episode_frames = _check_int("max_episode_frames", max_episode_frames, 1)
-    noop_max = _check_int("noop_max", noop_max, 0)
+    frame_skip = check_int("frame_skip", frame_skip, 1)
+    max_episode_frames = check_int("max_episode_frames", max_episode_frames, 1)
+    noop_max = check_int("noop_max", noop_max, 0)
     if obs is None:
         obs = "ram" if cfg.ram_observation else "atari84"
     if obs not in OBS_KINDS:
@@ -114,12 +104,12 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
         plan = dataclasses.replace(plan, frames_layout=FRAMES_LAYOUT)
         # raises a clear ValueError naming what needs the subproc backend
         return Env(plan, cfg, seed, make_envpool_backend(plan, seed, max_episode_frames))
-    inline_envs = _check_int("inline_envs", inline_envs, 0) if inline_envs is not None else None
+    inline_envs = check_int("inline_envs", inline_envs, 0) if inline_envs is not None else None
     if num_workers is None:
         num_workers, default_inline = default_split(num_envs, _available_cores())
         inline_envs = default_inline if inline_envs is None else inline_envs
     inline_envs = inline_envs or 0
-    num_workers = _check_int("num_workers", num_workers, 1)
+    num_workers = check_int("num_workers", num_workers, 1)
     if num_workers > num_envs:
         raise ValueError(f"num_workers must be <= num_envs ({num_envs}), got {num_workers}")
     if num_workers + inline_envs > num_envs:
@@ -288,9 +278,20 @@ class Env:
         self.backend.send_step()
         self._in_flight = (state, draws, self._reset_pending.copy())
 
-    def recv(self):
-        """Finish the step started by :meth:`send`: (obs, reward, terminated, truncated, info)."""
+    def recv(self, timeout: float | None = None):
+        """Finish the step started by :meth:`send`: (obs, reward, terminated, truncated, info).
+
+        ``timeout``: at most this many seconds of waiting for the worker processes (the envs
+        emulated in this process, ``inline_envs``, are not bounded by it), then ``TimeoutError``
+        naming the late workers; the step stays in flight and a later ``recv()`` finishes it
+        as if it had never stopped.  ``None`` (the default) waits as long as it takes; a worker
+        that dies is reported either way.  Only the ``subproc`` backend can honour it."""
         self._check_open()
+        if timeout is not None:
+            timeout = check_real("timeout", timeout, 0)
+            if not getattr(self.backend, "RECV_TIMEOUT", False):
+                raise ValueError(f"recv(timeout=...) needs backend='subproc': "
+                                 f"{type(self.backend).__name__} cannot bound its wait")
         if self._in_flight is None:
             if self._needs_reset:
                 raise RuntimeError("nothing in flight, and the env needs reset() (before the "
@@ -298,15 +299,15 @@ class Env:
             raise RuntimeError("nothing in flight: call send(actions) first")
         state, draws, was_reset = self._in_flight
         try:
-            out = self.backend.recv()
+            out = self.backend.recv(**({} if timeout is None else {"timeout": timeout}))
             done = (out["terminated"] | out["truncated"]).astype(bool)
             new_episode = was_reset | (done if self.plan.autoreset else False)
             result = self._finish(state, draws, out, new_episode, was_reset)
         except BaseException:
-            # interrupted (Ctrl-C) while waiting: the step stays in flight and the next recv()
-            # resumes it.  Interrupted inside this process's emulation (InterruptedStepError) or
-            # after the emulators finished: they are ahead of this env's state, so it needs a
-            # reset rather than silently diverging.
+            # interrupted (Ctrl-C) or timed out while waiting: the step stays in flight and the
+            # next recv() resumes it.  Interrupted inside this process's emulation
+            # (InterruptedStepError) or after the emulators finished: they are ahead of this
+            # env's state, so it needs a reset rather than silently diverging.
             if not getattr(self.backend, "pending", False):
                 self._in_flight, self._needs_reset = None, True
             raise

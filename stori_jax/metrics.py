@@ -9,8 +9,8 @@
 - ``next_state_variance(states)``: the spread of next states reached under a fixed action, the
   quantity of the paper's variance-calibration probe.
 
-Inputs are validated: a bad argument is a ``TypeError`` (wrong type) or ``ValueError`` (wrong
-value or shape) that names it.  Action counts are limited to ``MAX_ACTIONS`` (ALE has 18).
+Inputs are validated: a bad argument (wrong type, value or shape) is a ``ValueError`` that names
+it, worded as everywhere else in the package (``stori_jax.checks``).  Action counts are limited to ``MAX_ACTIONS`` (ALE has 18).
 """
 
 from __future__ import annotations
@@ -19,32 +19,17 @@ from typing import Sequence
 
 import numpy as np
 
+from stori_jax.checks import check_int, check_probability
+
 MAX_ACTIONS = 1024  # ALE's full action set is 18; the (n, n) matrices stay small
 _ATOL = 1e-6  # how far a distribution's sum may be from 1
-
-
-def _check_num_actions(num_actions) -> int:
-    if isinstance(num_actions, (bool, np.bool_)) or not isinstance(num_actions, (int, np.integer)):
-        raise TypeError(f"num_actions must be an int in [1, {MAX_ACTIONS}], got {num_actions!r}")
-    if not 1 <= num_actions <= MAX_ACTIONS:
-        raise ValueError(f"num_actions must be in [1, {MAX_ACTIONS}], got {num_actions}")
-    return int(num_actions)
-
-
-def _check_prob(prob) -> float:
-    if isinstance(prob, (bool, np.bool_)) or not isinstance(prob, (int, float, np.integer,
-                                                                    np.floating)):
-        raise TypeError(f"prob must be a number in [0, 1], got {prob!r}")
-    if not 0.0 <= prob <= 1.0:  # also rejects NaN
-        raise ValueError(f"prob must be in [0, 1], got {prob}")
-    return float(prob)
 
 
 def _check_actions(name: str, values, num_actions: int) -> np.ndarray:
     """Action ids as an int array, each in [0, num_actions - 1] (no negative wrap-around)."""
     a = np.asarray(values)
     if a.size and not np.issubdtype(a.dtype, np.integer):
-        raise TypeError(f"{name} must be integer action ids, got dtype {a.dtype}")
+        raise ValueError(f"{name} must be integer action ids, got dtype {a.dtype}")
     if a.size and (a.min() < 0 or a.max() >= num_actions):
         bad = sorted(set(a[(a < 0) | (a >= num_actions)].tolist()))
         raise ValueError(f"{name} must be action ids in [0, {num_actions - 1}], got {bad}")
@@ -65,7 +50,7 @@ def _as_float_array(name: str, x) -> np.ndarray:
     try:
         return np.asarray(x, np.float64)
     except (TypeError, ValueError):
-        raise TypeError(f"{name} must be an array of numbers, got {x!r}") from None
+        raise ValueError(f"{name} must be an array of numbers, got {x!r}") from None
 
 
 def _entropy_bits(p: np.ndarray) -> float:
@@ -82,16 +67,16 @@ def channel_matrix(num_actions: int, prob: float,
     ``replacement`` is a sequence of action ids in [0, n - 1], drawn from uniformly by position as
     the environment does (``ActionNoise.replacement_actions``), so a repeated id counts once per
     occurrence: ``[1, 1, 2]`` replaces by 1 with prob 2p/3."""
-    prob = _check_prob(prob)
-    num_actions = _check_num_actions(num_actions)
+    prob = check_probability("prob", prob)
+    num_actions = check_int("num_actions", num_actions, 1, MAX_ACTIONS)
     if replacement is None:
         replacement = range(num_actions)
     elif isinstance(replacement, (str, bytes)) or not hasattr(replacement, "__iter__"):
-        raise TypeError(f"replacement must be a sequence of action ids, got {replacement!r}")
+        raise ValueError(f"replacement must be a sequence of action ids, got {replacement!r}")
     replacement = list(replacement)
     if any(isinstance(a, (bool, np.bool_)) or not isinstance(a, (int, np.integer))
            for a in replacement):
-        raise TypeError(f"replacement must be int action ids, got {replacement!r}")
+        raise ValueError(f"replacement must be int action ids, got {replacement!r}")
     if len(replacement) == 0:
         raise ValueError(f"replacement must be non-empty action ids in [0, {num_actions - 1}]")
     replacement = _check_actions("replacement", np.asarray(replacement, np.int64), num_actions)
@@ -119,7 +104,7 @@ def mutual_information(input_dist: np.ndarray, channel: np.ndarray) -> float:
 def action_channel_capacity(num_actions: int, prob: float) -> float:
     """Closed form, in bits: the channel is symmetric, so a uniform input achieves capacity,
     C = log2 n + (1 - p + p/n) log2(1 - p + p/n) + (n - 1)(p/n) log2(p/n)."""
-    n, prob = _check_num_actions(num_actions), _check_prob(prob)
+    n, prob = check_int("num_actions", num_actions, 1, MAX_ACTIONS), check_probability("prob", prob)
     stay, move = 1.0 - prob + prob / n, prob / n
     terms = [stay * np.log2(stay) if stay > 0 else 0.0,
              (n - 1) * move * np.log2(move) if move > 0 else 0.0]
@@ -129,7 +114,7 @@ def action_channel_capacity(num_actions: int, prob: float) -> float:
 def empirical_action_information(intended, executed, num_actions: int) -> float:
     """Plug-in estimate of I(A; Ã) in bits from logged pairs: ``intended`` and ``executed`` are
     int action ids in [0, num_actions - 1] of the same shape (any shape; paired elementwise)."""
-    num_actions = _check_num_actions(num_actions)
+    num_actions = check_int("num_actions", num_actions, 1, MAX_ACTIONS)
     a, e = np.asarray(intended), np.asarray(executed)
     if a.shape != e.shape or a.size == 0:
         raise ValueError("intended and executed must be non-empty and of the same size and "

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-import numbers
 from typing import Any, Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
+
+from stori_jax.checks import check_int
 
 
 class Trajectory(NamedTuple):
@@ -29,9 +30,7 @@ def rollout(env, policy_fn: Callable[[Any, jax.Array, jax.Array], jax.Array], pa
     here; its randomness comes from ``key`` (split once per step), so the same key, params and
     env seed give the same trajectory.
     """
-    if isinstance(num_steps, bool) or not isinstance(num_steps, numbers.Integral) \
-            or num_steps < 1:
-        raise ValueError(f"num_steps must be an int >= 1, got {num_steps!r}")
+    num_steps = check_int("num_steps", num_steps, 1)
     if not isinstance(key, jax.Array):
         raise ValueError(f"key must be a JAX PRNG key (jax.random.key(seed) or "
                          f"jax.random.PRNGKey(seed)), got {key!r}")

@@ -131,9 +131,26 @@ def test_random_shift_crops_the_edge_padded_frames_at_offsets_within_the_pad():
     np.testing.assert_array_equal(ppo.random_shift(obs, jax.random.PRNGKey(1), 0), obs)
 
 
-def test_augment_shift_must_be_a_non_negative_int():
-    with pytest.raises(ValueError, match="augment_shift must be an int >= 0"):
-        tiny(augment_shift=-1)
+@pytest.mark.parametrize("field, value, message", [
+    ("augment_shift", -1, "augment_shift must be >= 0, got -1"),
+    ("augment_shift", 1.5, "augment_shift must be an int >= 0, got 1.5"),
+    ("num_envs", True, "num_envs must be an int >= 1, got True"),
+    ("gamma", "0.9", r"gamma must be a number in \[0, 1\], got '0.9'"),
+    ("gae_lambda", 1.5, r"gae_lambda must be in \[0, 1\], got 1.5"),
+    ("learning_rate", "3e-4", "learning_rate must be a finite number >= 0, got '3e-4'"),
+    ("ent_coef", float("nan"), "ent_coef must be a finite number >= 0, got nan"),
+    ("anneal_lr", "no", "anneal_lr must be True or False, got 'no'"),
+    ("clip_vloss", 1, "clip_vloss must be True or False, got 1"),
+])
+def test_ppo_config_fields_are_checked(field, value, message):
+    with pytest.raises(ValueError, match=message):
+        tiny(**{field: value})
+
+
+def test_ppo_config_stores_plain_python_numbers():
+    config = tiny(num_envs=np.int64(2), gamma=np.float32(0.5), learning_rate=1)
+    assert type(config.num_envs) is int and type(config.gamma) is float
+    assert type(config.learning_rate) is float and config.learning_rate == 1.0
 
 
 def test_seed_must_leave_room_for_both_halves_env_seeds():

@@ -133,6 +133,39 @@ def test_an_interrupted_step_stays_in_flight_and_can_be_finished():
         twin.close()
 
 
+@pytest.mark.timeout(60)
+def test_a_timed_out_recv_names_the_late_worker_and_can_be_finished():
+    """recv(timeout) while a worker is stopped (SIGSTOP): a TimeoutError that names it, the step
+    stays in flight, and once the worker runs again recv() finishes it as an uninterrupted twin
+    does."""
+    kw = dict(num_envs=2, num_workers=2, inline_envs=0)
+    ev, twin = make("Breakout", **kw), make("Breakout", **kw)
+    try:
+        ev.reset()
+        twin.reset()
+        actions = np.array([1, 3], np.int32)
+        late = ev.backend.pids[1]
+        os.kill(late, signal.SIGSTOP)
+        try:
+            ev.send(actions)
+            with pytest.raises(TimeoutError, match=rf"emulator worker\(s\) \[1\] \(pids "
+                                                   rf"\[{late}\]\) did not finish a step within "
+                                                   rf"0\.2 s; it is still in flight"):
+                ev.recv(timeout=0.2)
+            with pytest.raises(RuntimeError, match="in flight"):
+                ev.step(actions)
+        finally:
+            os.kill(late, signal.SIGCONT)
+        got, expected = ev.recv(timeout=30), twin.step(actions)
+        for name, a, b in zip(("obs", "reward", "terminated", "truncated"), got, expected):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b), err_msg=name)
+        got, expected = ev.step([2, 0]), twin.step([2, 0])
+        np.testing.assert_array_equal(np.asarray(got[4]["ram"]), np.asarray(expected[4]["ram"]))
+    finally:
+        ev.close()
+        twin.close()
+
+
 CHILD = textwrap.dedent("""
     import faulthandler
     import signal
@@ -241,6 +274,19 @@ def test_a_rejected_action_leaves_the_env_usable(breakout):
     assert obs.shape == (3, 128)
 
 
+@pytest.mark.parametrize("timeout, message", [
+    (-1, "timeout must be a finite number >= 0, got -1.0"),
+    ("5", "timeout must be a finite number >= 0, got '5'"),
+    (float("inf"), "timeout must be a finite number >= 0, got inf"),
+])
+def test_a_bad_recv_timeout_is_refused_before_waiting(breakout, timeout, message):
+    breakout.reset()
+    breakout.send(np.zeros(3, np.int32))
+    with pytest.raises(ValueError, match=message):
+        breakout.recv(timeout=timeout)
+    breakout.recv(timeout=30)  # the step was left in flight, untouched
+
+
 def test_step_before_reset_and_send_recv_misuse():
     env = make("Breakout")
     try:
@@ -273,7 +319,7 @@ def test_step_before_reset_and_send_recv_misuse():
      r"granularity must be one of \['frame', 'step'\]"),
     (dict(game="Breakout", backend="threads"), r"backend must be one of \['subproc', 'envpool'\]"),
     (dict(game="Breakout", frame_skip=0), r"frame_skip must be >= 1"),
-    (dict(game="Breakout", seed=-1), r"seed must be >= 0"),
+    (dict(game="Breakout", seed=-1), r"seed must be in \[0, 2147483647\], got -1"),
     (dict(game="Breakout", seed=1.5), r"seed must be an int"),
     (dict(game="Breakout", preset="1", config=Config()), r"either preset or config"),
     (dict(game="Breakout", config=Config(ram_observation=True), obs="raw"),

@@ -97,3 +97,12 @@ def test_unsupported_configs_name_the_subproc_backend(kwargs, message):
     with pytest.raises(ValueError, match=message) as e:
         stori_jax.make(game, preset, num_envs=2, seed=0, **args)
     assert "backend='subproc'" in str(e.value)
+
+
+def test_a_recv_timeout_is_refused_and_leaves_the_step_in_flight():
+    with stori_jax.make("Breakout", num_envs=2, seed=0, obs="ram", **EP) as env:
+        env.reset()
+        env.send(np.zeros(2, np.int32))
+        with pytest.raises(ValueError, match=r"recv\(timeout=...\) needs backend='subproc'"):
+            env.recv(timeout=1.0)
+        env.recv()  # the step was neither lost nor half-done

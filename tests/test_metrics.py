@@ -65,13 +65,13 @@ def test_empirical_action_ids_are_validated():
         empirical_action_information([0, 1, 2, -1], [0, 1, 2, 3], 4)
     with pytest.raises(ValueError, match=r"executed must be action ids in \[0, 3\], got \[4\]"):
         empirical_action_information([0, 1, 2, 3], [0, 1, 2, 4], 4)
-    with pytest.raises(TypeError, match="intended must be integer action ids"):
+    with pytest.raises(ValueError, match="intended must be integer action ids"):
         empirical_action_information([0.0, 1.0], [0, 1], 4)
     with pytest.raises(ValueError, match="same size and shape"):  # would pair the wrong elements
         empirical_action_information(np.zeros((2, 3), int), np.zeros((3, 2), int), 4)
     with pytest.raises(ValueError, match="non-empty"):
         empirical_action_information([], [], 4)
-    with pytest.raises(TypeError, match="num_actions must be an int"):
+    with pytest.raises(ValueError, match="num_actions must be an int"):
         empirical_action_information([0], [0], 4.0)
     assert empirical_action_information(np.array([0, 1, 2, 3]), np.array([0, 1, 2, 3]),
                                         np.int64(4)) == pytest.approx(2.0)
@@ -92,7 +92,7 @@ def test_mutual_information_inputs_are_validated():
         mutual_information([0.5, 0.5], [[1.0, 0.0], [0.5, 0.4]])
     with pytest.raises(ValueError, match="channel rows must be finite and non-negative"):
         mutual_information([0.5, 0.5], [[1.5, -0.5], [0.0, 1.0]])
-    with pytest.raises(TypeError, match="input_dist must be an array of numbers"):
+    with pytest.raises(ValueError, match="input_dist must be an array of numbers"):
         mutual_information(["a", "b"], np.eye(2))
     # a tiny rounding error is fine, and a channel may have a different output alphabet
     assert mutual_information([0.5, 0.5 + 1e-9], np.eye(2)) == pytest.approx(1.0)
@@ -112,21 +112,21 @@ def test_channel_matrix_replacement_is_validated_and_repeats_count():
         channel_matrix(4, 0.3, [-1, 0, 5])
     with pytest.raises(ValueError, match="replacement must be non-empty"):
         channel_matrix(4, 0.3, [])
-    with pytest.raises(TypeError, match="replacement must be int action ids"):
+    with pytest.raises(ValueError, match="replacement must be int action ids"):
         channel_matrix(4, 0.3, [1.0, 2.0])
-    with pytest.raises(TypeError, match="replacement must be int action ids"):
+    with pytest.raises(ValueError, match="replacement must be int action ids"):
         channel_matrix(4, 0.3, [True])
-    with pytest.raises(TypeError, match="replacement must be a sequence of action ids"):
+    with pytest.raises(ValueError, match="replacement must be a sequence of action ids"):
         channel_matrix(4, 0.3, "01")
 
 
 @pytest.mark.parametrize("n, p, error, message", [
-    (4, "0.3", TypeError, r"prob must be a number in \[0, 1\]"),
-    (4, True, TypeError, r"prob must be a number in \[0, 1\]"),
+    (4, "0.3", ValueError, r"prob must be a number in \[0, 1\]"),
+    (4, True, ValueError, r"prob must be a number in \[0, 1\]"),
     (4, float("nan"), ValueError, r"prob must be in \[0, 1\]"),
     (4, -0.1, ValueError, r"prob must be in \[0, 1\]"),
-    (2.5, 0.3, TypeError, "num_actions must be an int"),
-    ("4", 0.3, TypeError, "num_actions must be an int"),
+    (2.5, 0.3, ValueError, "num_actions must be an int"),
+    ("4", 0.3, ValueError, "num_actions must be an int"),
     (0, 0.3, ValueError, r"num_actions must be in \[1, 1024\]"),
     (10 ** 6, 0.3, ValueError, r"num_actions must be in \[1, 1024\]"),
 ])

@@ -35,7 +35,7 @@ def test_rollout_stacks_time_major_and_is_deterministic():
 
 def test_rollout_rejects_bad_num_steps():
     with stori_jax.make("Breakout", num_envs=1, seed=0, obs="ram") as env:
-        with pytest.raises(ValueError, match="num_steps must be an int >= 1"):
+        with pytest.raises(ValueError, match="num_steps must be >= 1, got 0"):
             stori_jax.rollout(env, random_policy, {"num_actions": 4}, jax.random.PRNGKey(0), 0)
         with pytest.raises(ValueError, match="num_steps must be an int >= 1, got True"):
             stori_jax.rollout(env, random_policy, {"num_actions": 4}, jax.random.PRNGKey(0), True)

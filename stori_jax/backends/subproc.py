@@ -12,6 +12,7 @@ import multiprocessing as mp
 import os
 import pickle
 import sys
+import time
 import weakref
 from multiprocessing.connection import wait
 
@@ -88,6 +89,8 @@ def _shutdown(processes, conns) -> None:
 class SubprocBackend:
     """Owns the worker processes and the shared buffers of one batched env."""
 
+    RECV_TIMEOUT = True  # recv(timeout) bounds the wait for the workers
+
     frames_layout = "pair"  # or "pooled" (set in __init__)
 
     def __init__(self, *, game: str, seeds: list[int], num_workers: int, frame_skip: int,
@@ -131,7 +134,7 @@ class SubprocBackend:
             child_conn.close()
             self.processes.append(process)
             self.conns.append(parent_conn)
-        self._pending = False
+        self._pending, self._what = False, "start"
         self._waiting = None
         try:
             self._wait_all("start")
@@ -171,19 +174,28 @@ class SubprocBackend:
         raise WorkerError(f"emulator worker {w} (envs {lo}..{hi - 1}, pid {p.pid}) died {when} "
                           f"with exit code {p.exitcode}; the environment is closed")
 
-    def _wait_all(self, what: str) -> dict[int, bytes]:
-        # The workers still to reply live on self: if the wait is interrupted (Ctrl-C), the
-        # command stays pending and the next recv() resumes it, instead of a later command
-        # taking this one's replies (and the workers' half-written buffers) for its own.
+    def _wait_all(self, what: str, timeout: float | None = None) -> dict[int, bytes]:
+        # The workers still to reply live on self: if the wait is interrupted (Ctrl-C) or times
+        # out, the command stays pending and the next recv() resumes it, instead of a later
+        # command taking this one's replies (and the workers' half-written buffers) for its own.
         if self._waiting is None:
             self._waiting, self._replies = dict(enumerate(self.conns)), {}
         waiting = self._waiting
+        deadline = None if timeout is None else time.monotonic() + timeout
         try:
             while waiting:
                 # only the workers still to reply: a finished worker that dies meanwhile is
                 # reported by the next command, instead of waking this loop over and over
                 sentinels = {self.processes[w].sentinel: w for w in waiting}
-                ready = wait(list(waiting.values()) + list(sentinels), timeout=None)
+                left = None if deadline is None else max(0.0, deadline - time.monotonic())
+                ready = wait(list(waiting.values()) + list(sentinels), timeout=left)
+                if not ready:
+                    late = sorted(waiting)
+                    raise TimeoutError(
+                        f"emulator worker(s) {late} (pids "
+                        f"{[self.processes[w].pid for w in late]}) did not finish {what} within "
+                        f"{timeout:g} s; it is still in flight: call recv() again to keep "
+                        "waiting, or close() the env")
                 for obj in ready:
                     if obj in sentinels:
                         w = sentinels[obj]
@@ -212,14 +224,15 @@ class SubprocBackend:
 
     def send_reset(self) -> None:
         self._send_all(b"R")
-        self._inline_command = b"R"
+        self._inline_command, self._what = b"R", "a reset"
 
     def send_step(self) -> None:
         self._send_all(b"S")
-        self._inline_command = b"S"
+        self._inline_command, self._what = b"S", "a step"
 
-    def recv(self) -> dict[str, np.ndarray]:
-        """Wait for the workers; the returned views stay valid until the next send."""
+    def recv(self, timeout: float | None = None) -> dict[str, np.ndarray]:
+        """Wait for the workers (at most ``timeout`` seconds, then TimeoutError with the command
+        still pending); the returned views stay valid until the next send."""
         if self.closed:
             raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
         if not self._pending:
@@ -236,7 +249,7 @@ class SubprocBackend:
                     raise
                 self._inline_next += 1
             self._inline_command, self._inline_next = None, 0
-        self._wait_all("a step")
+        self._wait_all(self._what, timeout)
         if self._inline_broken is not None:
             env, self._inline_broken = self._inline_broken, None
             self._inline_command, self._inline_next = None, 0

@@ -1,0 +1,67 @@
+"""Checks of scalar arguments, shared by every public entry point.
+
+One wording and one exception type (``ValueError``, wrong type or out of range alike) for the
+whole package, so that ``make``, the configs, ``rollout``, the metrics, the PPO config, the CLI
+and the results loader describe bad input the same way.  Each check names the field and the
+allowed values, and returns the value as a plain Python number (numpy scalars are accepted).
+"""
+from __future__ import annotations
+
+import math
+import numbers
+from typing import Any
+
+
+def _range_text(minimum, maximum) -> str:
+    if minimum is not None and maximum is not None:
+        return f"in [{minimum}, {maximum}]"
+    if minimum is not None:
+        return f">= {minimum}"
+    if maximum is not None:
+        return f"<= {maximum}"
+    return ""
+
+
+def _shown(value: Any) -> str:
+    """``repr(value)``, cut short if long (a 400-digit int, a big list)."""
+    text = repr(value)
+    return text if len(text) <= 60 else f"{text[:40]}... ({len(text)} characters)"
+
+
+def check_int(name: str, value: Any, minimum: int | None = None,
+              maximum: int | None = None) -> int:
+    """``value`` as an int in [minimum, maximum] (either bound may be None); bools refused."""
+    bounds = _range_text(minimum, maximum)
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise ValueError(f"{name} must be an int{' ' + bounds if bounds else ''}, "
+                         f"got {_shown(value)}")
+    value = int(value)
+    if (minimum is not None and value < minimum) or (maximum is not None and value > maximum):
+        raise ValueError(f"{name} must be {bounds}, got {value}")
+    return value
+
+
+def check_real(name: str, value: Any, minimum: float | None = None,
+               maximum: float | None = None) -> float:
+    """``value`` as a finite float in [minimum, maximum] (either bound may be None); bools,
+    strings, NaN and infinities refused."""
+    bounds = _range_text(minimum, maximum)
+    if minimum is not None and maximum is not None:  # "in [a, b]" already says finite
+        kind, wanted = "a number " + bounds, bounds
+    else:
+        kind = wanted = f"a finite number{' ' + bounds if bounds else ''}"
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise ValueError(f"{name} must be {kind}, got {_shown(value)}")
+    try:
+        number = float(value)
+    except OverflowError:  # an int too large for a float
+        raise ValueError(f"{name} must be {wanted}, got {_shown(value)}") from None
+    if (not math.isfinite(number) or (minimum is not None and number < minimum)
+            or (maximum is not None and number > maximum)):
+        raise ValueError(f"{name} must be {wanted}, got {number}")
+    return number
+
+
+def check_probability(name: str, value: Any) -> float:
+    """``value`` as a float in [0, 1]."""
+    return check_real(name, value, 0, 1)
