@@ -101,8 +101,10 @@ def before_step(plan: Plan, state: EnvState, actions: jax.Array, resetting: bool
             bits = jnp.zeros((b,), jnp.int32)
             for slot in range(2):
                 bits |= jnp.where(mask_apply[:, slot] & step_active, STEP_RENDER_BITS[slot], 0)
-                if reset_on:
-                    bits |= jnp.where(mask_apply[:, slot], RESET_RENDER_BITS[slot], 0)
+            if reset_on:
+                # a reset shows one emulator frame (in both slots): one decision for it
+                bits |= jnp.where(mask_apply[:, 1], RESET_RENDER_BITS[0] | RESET_RENDER_BITS[1],
+                                  0)
             ram_render = bits.astype(jnp.uint8)
 
     if plan.noop_max > 0:
@@ -154,10 +156,13 @@ def after_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, ne
         slots = ([frames[0], frames[1]] if pair else [F.pool_screens(frames, plan.frames_layout)])
         masked_slots = []
         for j, screen in enumerate(slots):
-            apply = draws.mask_apply[:, j:j + 1] & gate[:, None]
+            # the first obs of an episode is one emulator frame (in both slots of a pair): it
+            # gets one decision (and one torch centre), slot 1's, like any other frame
+            k = jnp.where(new_episode, 1, j) if pair else jnp.zeros_like(new_episode, jnp.int32)
+            apply = jnp.take_along_axis(draws.mask_apply, k[:, None], 1) & gate[:, None]
             if m.torch:
-                screen = F.apply_masks(screen[:, None], apply,
-                                       centres=draws.mask_centres[:, j:j + 1])[:, 0]
+                centres = jnp.take_along_axis(draws.mask_centres, k[:, None, None], 1)
+                screen = F.apply_masks(screen[:, None], apply, centres=centres)[:, 0]
             else:
                 hidden, fill = plan.static_mask(game)
                 screen = F.apply_masks(screen[:, None], apply, hidden=hidden, fill=fill)[:, 0]

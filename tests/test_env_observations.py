@@ -314,6 +314,54 @@ def test_mask_at_frame_granularity_applies_to_each_pooled_screen_with_probabilit
     assert not binomial_ok(int(masked.sum()), masked.size, p), "one draw per step would be p"
 
 
+def reset_observations(game, mask, resets, num_envs=8):
+    """(resets * num_envs) first observations of an episode and their obs_masked flags."""
+    env = make(game, Config(observation=mask), obs="raw", num_envs=num_envs)
+    try:
+        seen = [env.reset() for _ in range(resets)]
+    finally:
+        env.close()
+    obs = np.concatenate([np.asarray(o) for o, _ in seen])
+    return obs, np.concatenate([np.asarray(i["obs_masked"]) for _, i in seen])
+
+
+def test_the_first_observation_of_an_episode_gets_one_mask_decision():
+    """A reset shows one emulator frame (copied into both pooled slots), so it is masked with
+    probability p and, when masked, wholly: the left half is black exactly when obs_masked.
+    (Two decisions on the one frame gave a flag rate of 1 - (1 - p)^2 and, under a black crop,
+    an observation that showed through whenever one of them missed.)"""
+    p = 0.5
+    obs, masked = reset_observations("Breakout", ObservationMask("crop", 1, p), resets=32)
+    left_black = (obs[:, :, :80] == 0).all(axis=(1, 2, 3))
+    np.testing.assert_array_equal(left_black, masked)
+    assert binomial_ok(int(masked.sum()), masked.size, p)
+    assert not binomial_ok(int(masked.sum()), masked.size, 1 - (1 - p) ** 2)
+
+
+def test_the_first_observation_of_an_episode_shows_one_torch_disc():
+    obs, masked = reset_observations("Breakout", ObservationMask("crop", 5, 1.0), resets=2)
+    twin = make("Breakout", obs="raw", num_envs=8)
+    try:
+        twin_obs = np.asarray(twin.reset()[0])
+    finally:
+        twin.close()
+    assert masked.all()
+    for o, w in zip(obs, np.concatenate([twin_obs, twin_obs])):
+        kept = (o == w).all(-1)
+        seen, hidden = kept & (w != 0).any(-1), ~kept
+        assert len(torch_centres(seen, hidden)), "no single disc explains the first observation"
+
+
+def test_the_first_observation_of_an_episode_gets_one_ram_render_decision():
+    p = 0.5
+    obs, masked = reset_observations("Boxing", ObservationMask("ram", 2, p), resets=24)
+    ring = (slice(None), slice(37, 176), slice(33, 127))
+    enemy_shown = (obs[ring] == 0).all(-1).sum(axis=(1, 2)) > 20
+    np.testing.assert_array_equal(enemy_shown, ~masked)
+    assert binomial_ok(int(masked.sum()), masked.size, p)
+    assert not binomial_ok(int(masked.sum()), masked.size, 1 - (1 - p) ** 2)
+
+
 # ---------------------------------------------------------------------------------------------
 # type 0: the RAM observation and its labels
 # ---------------------------------------------------------------------------------------------
