@@ -233,7 +233,8 @@ def test_gopher_fill_is_undone_and_digging_is_not():
     np.testing.assert_array_equal(keep.ram, zero.ram)
     np.testing.assert_array_equal(keep.stacked("event_fired"), zero.stacked("event_fired"))
     ground = keep.ram[:, :, :24]
-    fills = (ground[:-1] & ~ground[1:]).any(-1) & ~keep.done  # (T, B); a reset clears all
+    scored = keep.stacked("reward") > 0  # a fill earns 20 points on the frame that clears it
+    fills = (ground[:-1] & ~ground[1:]).any(-1) & scored & ~keep.done  # (T, B)
     digs = (~ground[:-1] & ground[1:]).any(-1)
     assert not fills.any(), np.argwhere(fills)
     assert digs.sum() > 10
@@ -243,6 +244,28 @@ def test_gopher_fill_is_undone_and_digging_is_not():
     np.testing.assert_array_equal(r_zero[fired == 0], r_keep[fired == 0])
     lost = r_keep[fired > 0] - r_zero[fired > 0]
     assert (lost >= 0).all() and (lost % 20 == 0).all() and lost.sum() > 0
+
+
+def test_gopher_hole_rule_leaves_the_new_round_refill_alone():
+    """Under NOOP the farmer never fills, but after the gopher eats a carrot the game itself
+    refills the underground for the next round (68 bits on step 731 of seed 0, no points).
+    Modes 1 and 2 at p = 1 must not undo that refill: the RAM stays the 3.1 twin's, step for
+    step, and the event never fires.  (The spec's literal rule, any bit cleared, restored the
+    old tunnels into the new round.)"""
+    steps = 735
+    envs = [make("Gopher", event(1, 1.0)), make("Gopher", event(2, 1.0)), make("Gopher")]
+    try:
+        *events, twin = run_lockstep(envs, steps, lambda k, runs: [NOOP, NOOP])
+    finally:
+        for env in envs:
+            env.close()
+    ground = twin.ram[:, :, :24]
+    refilled = np.unpackbits((ground[:-1] & ~ground[1:]).astype(np.uint8), axis=-1).sum(-1)
+    assert (refilled >= 17).any(), "the twin should have started a new round"
+    for ev in events:
+        assert not ev.stacked("event_fired").any()
+        np.testing.assert_array_equal(ev.ram, twin.ram)
+        np.testing.assert_array_equal(ev.stacked("reward"), twin.stacked("reward"))
 
 
 def test_gopher_carrot_dies_once_per_episode_after_episode_frame_238():

@@ -382,16 +382,21 @@ def test_boxing_labels():
 @pytest.mark.parametrize("mode", [1, 2])
 def test_gopher_fill_undone_dig_kept(mode):
     rule = gopher.EVENTS[mode]
-    prev = make_ram({0: 0b0101, 7: 0b1111_0000, 23: 0b1000_0001, 40: 255})
+    prev = make_ram({0: 0b0101, 7: 0b1111_0000, 23: 0b1000_0001, 40: 255, 49: 0x09, 50: 0x90})
     ram = prev.copy()
     ram[0] = 0b0110  # bit 0 filled, bit 1 dug
     ram[7] = 0b1011_0000  # bit 6 filled
     ram[23] = 0b1000_0011  # only dug
     ram[40] = 0  # outside the underground: ignored
+    ram[49], ram[50] = 0x10, 0x10  # the fill's 20 points: score 990 -> 1010 (BCD)
     out = post(rule, prev, ram, u=BELOW)
     assert out.fired and out.writes == {0: 0b0111, 7: 0b1111_0000}
     assert out.zero_reward == (mode == 2) and not out.cancel_next_reward
     assert post(rule, prev, ram, u=AT) == NO_EVENT
+    # the same clearing without points is the game refilling the underground for a new round
+    unscored = ram.copy()
+    unscored[49], unscored[50] = prev[49], prev[50]
+    assert post(rule, prev, unscored, u=0.0) == NO_EVENT
     # digging alone (bits set) is never undone
     dig = prev.copy()
     dig[5] = 0b11
@@ -408,7 +413,10 @@ def test_gopher_fill_writes_never_clear_a_bit():
         ram = rng.integers(0, 256, 128, dtype=np.uint8)
         out = post(rule, prev, ram, u=0.0)
         fills = prev[:24] & ~ram[:24]
-        assert out.fired == bool(fills.any())
+        scored = gopher.score(prev.astype(int)) != gopher.score(ram.astype(int))
+        assert out.fired == bool(fills.any() and scored)
+        if not out.fired:
+            continue
         for i, v in out.writes.items():
             assert i < 24
             assert v & ram[i] == ram[i]  # nothing dug (set now) is cleared

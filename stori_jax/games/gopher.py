@@ -81,11 +81,21 @@ RAM_OBS = {
 }
 
 
+def score(ram):
+    """The score in RAM 48..50 (BCD), of int RAM arrays (numpy or jax, any leading shape)."""
+    return (10000 * bcd(ram[..., SCORE_HIGH]) + 100 * bcd(ram[..., SCORE_MIDDLE])
+            + bcd(ram[..., SCORE_LOW]))
+
+
 def _hole_stays_open(zero_reward: bool):
     def post_frame(prev_ram, ram, start_ram, state, u, u_choice, p, episode_frame):
-        # A fill is a bit this frame clears (1 before, 0 now); digging (setting bits) is left alone.
+        # A fill is a bit this frame clears (1 before, 0 now) while scoring: the farmer's fill
+        # earns 20 points on the frame that clears it.  Digging (setting bits) is left alone,
+        # and so is the game's own refilling of the whole underground when a new round starts
+        # after a carrot is eaten (17-68 bits at once, no points; STORI_SPEC section 7 assumes
+        # only the farmer clears bits).
         fills = prev_ram[UNDERGROUND_RAM] & ~ram[UNDERGROUND_RAM]
-        if not np.any(fills) or not u < p:
+        if not np.any(fills) or score(ram.astype(np.int32)) == score(prev_ram.astype(np.int32)) or not u < p:
             return NO_EVENT
         return EventOutcome(writes={int(i): int(ram[i] | f)
                                     for i, f in zip(UNDERGROUND_RAM, fills) if f},
@@ -115,8 +125,7 @@ EVENTS = {
 
 LABELS = {
     "farmer_x": lambda ram: ram[..., FARMER_X],
-    "score": lambda ram: (10000 * bcd(ram[..., SCORE_HIGH]) + 100 * bcd(ram[..., SCORE_MIDDLE])
-                          + bcd(ram[..., SCORE_LOW])),
+    "score": score,
     "carrots": lambda ram: ram[..., CARROTS] & 7,
     "seed_x": lambda ram: ram[..., SEED_X],
     "seed_y": lambda ram: ram[..., SEED_Y],
