@@ -102,6 +102,9 @@ class ObservationMask:
         _check_choice("ObservationMask", "kind", self.kind, MASK_KINDS)
         mode = check_int("ObservationMask.mode", self.mode)
         object.__setattr__(self, "mode", mode)
+        if mode == 0:
+            raise ValueError(f"ObservationMask.mode 0 is the spec's 'none' for kind "
+                             f"{self.kind!r}: leave the mask out (no observation mask is 3.1)")
         if self.kind == "crop":
             _check_choice("ObservationMask", "mode (crop)", mode, CROP_MODES)
         elif mode < 1:

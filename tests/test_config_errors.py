@@ -68,9 +68,12 @@ def test_unknown_blackout_ram_event_mode(game):
                                              rf"{n + 1} is not one of {game}'s {what}: "
                                              rf"allowed {allowed(n)}"):
             drifted.for_game(game)
-        with pytest.raises(ValueError, match=rf"ObservationMask\.mode must be >= 1 for kind "
-                                             rf"'{kind}', got 0"):
+        with pytest.raises(ValueError, match=rf"ObservationMask\.mode 0 is the spec's 'none' "
+                                             rf"for kind '{kind}': leave the mask out"):
             ObservationMask(kind, 0)
+        with pytest.raises(ValueError, match=rf"ObservationMask\.mode must be >= 1 for kind "
+                                             rf"'{kind}', got -1"):
+            ObservationMask(kind, -1)
     Config(event=RandomEvent(n_event, 0.1), game=game)
     with pytest.raises(ValueError, match=rf"Config\.event\.mode {n_event + 1} is not one of "
                                          rf"{game}'s event modes: allowed {allowed(n_event)}"):
@@ -91,7 +94,15 @@ def test_modes_on_a_non_stori_game():
         Config(event=RandomEvent(1, 0.5), game="Pong")
 
 
-@pytest.mark.parametrize("mode", [6, 0, -1])
+def test_mode_0_none_says_to_leave_the_mask_out():
+    with pytest.raises(ValueError, match=r"mode 0 is the spec's 'none' for kind 'crop'"):
+        ObservationMask("crop", 0)
+    with pytest.raises(ValueError, match=r"mode 0 is the spec's 'none' for kind 'blackout'"):
+        Config.from_reference({"stochasticity_type": "3.2", "partial_observation": {
+            "type": "blackout", "mode": "0", "prob": 1.0}})
+
+
+@pytest.mark.parametrize("mode", [6, -1])
 def test_unknown_crop_mode(mode):
     with pytest.raises(ValueError, match=r"ObservationMask\.mode \(crop\) must be one of "
                                          rf"{re.escape('[1, 2, 3, 4, 5]')}, got {mode}"):
