@@ -63,6 +63,7 @@ def _read_json_object(path: Path, what: str) -> dict:
 def _check_evaluation(path: Path, result: dict) -> None:
     """A clear ValueError if ``result`` is not what ``stori-jax eval`` writes."""
     from baselines.evaluate import POLICIES
+
     missing = [k for k in EVAL_KEYS if k not in result]
     if missing:
         raise ValueError(f"{path} lacks {missing}: not a stori-jax evaluation")

@@ -158,7 +158,7 @@ def after_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, ne
         for j, screen in enumerate(slots):
             # the first obs of an episode is one emulator frame (in both slots of a pair): it
             # gets one decision (and one torch centre), slot 1's, like any other frame
-            k = jnp.where(new_episode, 1, j) if pair else jnp.zeros_like(new_episode, jnp.int32)
+            k = jnp.where(new_episode & pair, 1, j)  # a pooled screen: slot 0's, always
             apply = jnp.take_along_axis(draws.mask_apply, k[:, None], 1) & gate[:, None]
             if m.torch:
                 centres = jnp.take_along_axis(draws.mask_centres, k[:, None, None], 1)

@@ -10,7 +10,8 @@
   quantity of the paper's variance-calibration probe.
 
 Inputs are validated: a bad argument (wrong type, value or shape) is a ``ValueError`` that names
-it, worded as everywhere else in the package (``stori_jax.checks``).  Action counts are limited to ``MAX_ACTIONS`` (ALE has 18).
+it, worded as everywhere else in the package (``stori_jax.checks``).  Action counts are limited
+to ``MAX_ACTIONS`` (ALE has 18).
 """
 
 from __future__ import annotations
@@ -23,6 +24,10 @@ from stori_jax.checks import check_int, check_probability
 
 MAX_ACTIONS = 1024  # ALE's full action set is 18; the (n, n) matrices stay small
 _ATOL = 1e-6  # how far a distribution's sum may be from 1
+
+
+def _check_num_actions(num_actions) -> int:
+    return check_int("num_actions", num_actions, 1, MAX_ACTIONS)
 
 
 def _check_actions(name: str, values, num_actions: int) -> np.ndarray:
@@ -68,7 +73,7 @@ def channel_matrix(num_actions: int, prob: float,
     the environment does (``ActionNoise.replacement_actions``), so a repeated id counts once per
     occurrence: ``[1, 1, 2]`` replaces by 1 with prob 2p/3."""
     prob = check_probability("prob", prob)
-    num_actions = check_int("num_actions", num_actions, 1, MAX_ACTIONS)
+    num_actions = _check_num_actions(num_actions)
     if replacement is None:
         replacement = range(num_actions)
     elif isinstance(replacement, (str, bytes)) or not hasattr(replacement, "__iter__"):
@@ -104,7 +109,7 @@ def mutual_information(input_dist: np.ndarray, channel: np.ndarray) -> float:
 def action_channel_capacity(num_actions: int, prob: float) -> float:
     """Closed form, in bits: the channel is symmetric, so a uniform input achieves capacity,
     C = log2 n + (1 - p + p/n) log2(1 - p + p/n) + (n - 1)(p/n) log2(p/n)."""
-    n, prob = check_int("num_actions", num_actions, 1, MAX_ACTIONS), check_probability("prob", prob)
+    n, prob = _check_num_actions(num_actions), check_probability("prob", prob)
     stay, move = 1.0 - prob + prob / n, prob / n
     terms = [stay * np.log2(stay) if stay > 0 else 0.0,
              (n - 1) * move * np.log2(move) if move > 0 else 0.0]
@@ -114,7 +119,7 @@ def action_channel_capacity(num_actions: int, prob: float) -> float:
 def empirical_action_information(intended, executed, num_actions: int) -> float:
     """Plug-in estimate of I(A; Ã) in bits from logged pairs: ``intended`` and ``executed`` are
     int action ids in [0, num_actions - 1] of the same shape (any shape; paired elementwise)."""
-    num_actions = check_int("num_actions", num_actions, 1, MAX_ACTIONS)
+    num_actions = _check_num_actions(num_actions)
     a, e = np.asarray(intended), np.asarray(executed)
     if a.shape != e.shape or a.size == 0:
         raise ValueError("intended and executed must be non-empty and of the same size and "
