@@ -95,8 +95,9 @@ def _hole_stays_open(zero_reward: bool):
         # after a carrot is eaten (17-68 bits at once, no points; STORI_SPEC section 7 assumes
         # only the farmer clears bits).
         fills = prev_ram[UNDERGROUND_RAM] & ~ram[UNDERGROUND_RAM]
-        scored = score(ram.astype(np.int32)) != score(prev_ram.astype(np.int32))
-        if not np.any(fills) or not scored or not u < p:
+        if not np.any(fills) or not u < p:
+            return NO_EVENT
+        if score(ram.astype(np.int32)) == score(prev_ram.astype(np.int32)):  # not the farmer
             return NO_EVENT
         return EventOutcome(writes={int(i): int(ram[i] | f)
                                     for i, f in zip(UNDERGROUND_RAM, fills) if f},
