@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import time
 
 import gymnasium as gym
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from stori_jax.backends.subproc import EnvClosedError, InterruptedStepError, SubprocBackend
+from stori_jax.backends.subproc import (EnvClosedError, InterruptedStepError, SubprocBackend,
+                                        WorkersLate)
 from stori_jax.checks import check_int, check_real
 from stori_jax.config import Config, GRANULARITIES
 from stori_jax.core import (Draws, EnvState, WorkerOutputs, after_step, before_step,
@@ -220,28 +222,56 @@ class Env:
 
     # -- reset ----------------------------------------------------------------------------------
 
-    def reset(self):
-        """Reset every env. Returns (obs, info)."""
+    def reset(self, timeout: float | None = None):
+        """Reset every env. Returns (obs, info).
+
+        ``timeout``: at most this many seconds of waiting for the worker processes in all (a step
+        still in flight is finished first), then ``TimeoutError`` naming the late workers; the env
+        then needs ``reset()`` again, which first waits for the late reset.  As in :meth:`recv`."""
         self._check_open()
+        deadline = self._deadline(timeout, "reset")
+        late = "the env needs reset(): call it again (it waits for this one first), or close() it"
+        # until this reset has finished, an interruption (Ctrl-C, a timeout) leaves an env that
+        # needs one
+        self._needs_reset = True
         if self._in_flight is not None or getattr(self.backend, "pending", False):
             # finish a step (or an interrupted reset) still in flight; a step interrupted inside
             # emulation needs nothing more: the reset below starts every emulator afresh
             with contextlib.suppress(InterruptedStepError):
-                self.backend.recv()
+                self._wait(deadline, timeout, late)
             self._in_flight = None
-        # until this reset has finished, an interruption (Ctrl-C) leaves an env that needs one
-        self._needs_reset = True
         zeros = jnp.zeros((self.num_envs,), jnp.int32)
         state = self._state._replace(episode_step=zeros, prev_executed=zeros)
         state, draws = before_step(self._jit_plan, state, zeros, resetting=True)
         self._write_inputs(self.backend.views, draws, reset_first=None)
         self.backend.send_reset()
-        out = self.backend.recv()
+        out = self._wait(deadline, timeout, late)
         everyone = np.ones(self.num_envs, bool)
         obs, _, _, _, info = self._finish(state, draws, out, everyone, everyone)
         self._needs_reset = False
         self._reset_pending[:] = False
         return obs, info
+
+    def _deadline(self, timeout, call: str) -> float | None:
+        """When a wait bounded by ``timeout`` seconds from now ends (None: no bound); checked
+        before anything is sent, so a refused timeout changes nothing."""
+        if timeout is None:
+            return None
+        timeout = check_real("timeout", timeout, 0)
+        if not getattr(self.backend, "RECV_TIMEOUT", False):
+            raise ValueError(f"{call}(timeout=...) needs backend='subproc': "
+                             f"{type(self.backend).__name__} cannot bound its wait")
+        return time.monotonic() + timeout
+
+    def _wait(self, deadline: float | None, timeout, late: str):
+        """The backend's recv, bounded by ``deadline``; late workers: TimeoutError ending in
+        the caller's advice ``late``."""
+        if deadline is None:
+            return self.backend.recv()
+        try:
+            return self.backend.recv(timeout=max(0.0, deadline - time.monotonic()))
+        except WorkersLate as e:
+            raise TimeoutError(f"{e} within {float(timeout):g} s; {late}") from None
 
     def validate_actions(self, actions) -> np.ndarray:
         """Host-side check: shape (B,), integer dtype, values in [0, num_actions)."""
@@ -287,11 +317,7 @@ class Env:
         as if it had never stopped.  ``None`` (the default) waits as long as it takes; a worker
         that dies is reported either way.  Only the ``subproc`` backend can honour it."""
         self._check_open()
-        if timeout is not None:
-            timeout = check_real("timeout", timeout, 0)
-            if not getattr(self.backend, "RECV_TIMEOUT", False):
-                raise ValueError(f"recv(timeout=...) needs backend='subproc': "
-                                 f"{type(self.backend).__name__} cannot bound its wait")
+        deadline = self._deadline(timeout, "recv")
         if self._in_flight is None:
             if self._needs_reset:
                 raise RuntimeError("nothing in flight, and the env needs reset() (before the "
@@ -299,7 +325,8 @@ class Env:
             raise RuntimeError("nothing in flight: call send(actions) first")
         state, draws, was_reset = self._in_flight
         try:
-            out = self.backend.recv(**({} if timeout is None else {"timeout": timeout}))
+            out = self._wait(deadline, timeout, "it is still in flight: call recv() again to "
+                                                "keep waiting, or close() the env")
             done = (out["terminated"] | out["truncated"]).astype(bool)
             new_episode = was_reset | (done if self.plan.autoreset else False)
             result = self._finish(state, draws, out, new_episode, was_reset)
@@ -315,10 +342,13 @@ class Env:
         self._reset_pending = np.zeros(self.num_envs, bool) if self.plan.autoreset else done
         return result
 
-    def step(self, actions):
-        """One agent step of every env: (obs, reward, terminated, truncated, info)."""
+    def step(self, actions, timeout: float | None = None):
+        """One agent step of every env: (obs, reward, terminated, truncated, info).
+        ``timeout`` bounds the wait for the workers as in :meth:`recv`."""
+        self._check_open()
+        self._deadline(timeout, "step")  # a timeout the backend cannot honour: refused unsent
         self.send(actions)
-        return self.recv()
+        return self.recv(timeout)
 
     # -- snapshots ------------------------------------------------------------------------------
 

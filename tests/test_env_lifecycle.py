@@ -133,11 +133,22 @@ def test_an_interrupted_step_stays_in_flight_and_can_be_finished():
         twin.close()
 
 
+@contextlib.contextmanager
+def stopped(pid):
+    """The process stopped (SIGSTOP) inside the block, continued after it."""
+    os.kill(pid, signal.SIGSTOP)
+    try:
+        yield
+    finally:
+        os.kill(pid, signal.SIGCONT)
+
+
 @pytest.mark.timeout(60)
-def test_a_timed_out_recv_names_the_late_worker_and_can_be_finished():
-    """recv(timeout) while a worker is stopped (SIGSTOP): a TimeoutError that names it, the step
-    stays in flight, and once the worker runs again recv() finishes it as an uninterrupted twin
-    does."""
+@pytest.mark.parametrize("call", ["recv", "step"])
+def test_a_timed_out_recv_names_the_late_worker_and_can_be_finished(call):
+    """recv(timeout), or step(timeout), while a worker is stopped (SIGSTOP): a TimeoutError that
+    names it, the step stays in flight, and once the worker runs again recv() finishes it as an
+    uninterrupted twin does."""
     kw = dict(num_envs=2, num_workers=2, inline_envs=0)
     ev, twin = make("Breakout", **kw), make("Breakout", **kw)
     try:
@@ -145,21 +156,55 @@ def test_a_timed_out_recv_names_the_late_worker_and_can_be_finished():
         twin.reset()
         actions = np.array([1, 3], np.int32)
         late = ev.backend.pids[1]
-        os.kill(late, signal.SIGSTOP)
-        try:
-            ev.send(actions)
+        with stopped(late):
             with pytest.raises(TimeoutError, match=rf"emulator worker\(s\) \[1\] \(pids "
                                                    rf"\[{late}\]\) did not finish a step within "
                                                    rf"0\.2 s; it is still in flight"):
-                ev.recv(timeout=0.2)
+                if call == "recv":
+                    ev.send(actions)
+                    ev.recv(timeout=0.2)
+                else:
+                    ev.step(actions, timeout=0.2)
             with pytest.raises(RuntimeError, match="in flight"):
                 ev.step(actions)
-        finally:
-            os.kill(late, signal.SIGCONT)
         got, expected = ev.recv(timeout=30), twin.step(actions)
         for name, a, b in zip(("obs", "reward", "terminated", "truncated"), got, expected):
             np.testing.assert_array_equal(np.asarray(a), np.asarray(b), err_msg=name)
         got, expected = ev.step([2, 0]), twin.step([2, 0])
+        np.testing.assert_array_equal(np.asarray(got[4]["ram"]), np.asarray(expected[4]["ram"]))
+    finally:
+        ev.close()
+        twin.close()
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("in_flight", [False, True], ids=["settled", "step-in-flight"])
+def test_a_timed_out_reset_needs_a_reset_that_waits_for_it(in_flight):
+    """reset(timeout) while a worker is stopped: a TimeoutError that names it (the timeout bounds
+    the wait for a step still in flight too); the env refuses steps until reset() again, which
+    waits for the late one and gives the same episode as an uninterrupted twin."""
+    kw = dict(num_envs=2, num_workers=2, inline_envs=0)
+    ev, twin = make("Breakout", **kw), make("Breakout", **kw)
+    try:
+        for env in (ev, twin):
+            env.reset()
+            env.step([1, 2])
+        late = ev.backend.pids[0]
+        with stopped(late):
+            if in_flight:
+                ev.send([3, 3])
+            started = time.monotonic()
+            with pytest.raises(TimeoutError, match=rf"emulator worker\(s\) \[0\] \(pids "
+                                                   rf"\[{late}\]\) did not finish a "
+                                                   rf"{'step' if in_flight else 'reset'} within "
+                                                   rf"0\.3 s; the env needs reset\(\)"):
+                ev.reset(timeout=0.3)
+            assert time.monotonic() - started < 5
+            with pytest.raises(RuntimeError, match=r"call reset\(\) first"):
+                ev.send([0, 0])
+        got, expected = ev.reset(timeout=30), twin.reset()
+        np.testing.assert_array_equal(np.asarray(got[0]), np.asarray(expected[0]))
+        got, expected = ev.step([1, 3], timeout=30), twin.step([1, 3])
         np.testing.assert_array_equal(np.asarray(got[4]["ram"]), np.asarray(expected[4]["ram"]))
     finally:
         ev.close()
@@ -279,9 +324,13 @@ def test_a_rejected_action_leaves_the_env_usable(breakout):
     ("5", "timeout must be a finite number >= 0, got '5'"),
     (float("inf"), "timeout must be a finite number >= 0, got inf"),
 ])
-def test_a_bad_recv_timeout_is_refused_before_waiting(breakout, timeout, message):
+def test_a_bad_timeout_is_refused_before_waiting_or_sending(breakout, timeout, message):
+    with pytest.raises(ValueError, match=message):
+        breakout.reset(timeout=timeout)
     breakout.reset()
-    breakout.send(np.zeros(3, np.int32))
+    with pytest.raises(ValueError, match=message):
+        breakout.step(np.zeros(3, np.int32), timeout=timeout)
+    breakout.send(np.zeros(3, np.int32))  # step() sent nothing
     with pytest.raises(ValueError, match=message):
         breakout.recv(timeout=timeout)
     breakout.recv(timeout=30)  # the step was left in flight, untouched

@@ -99,10 +99,14 @@ def test_unsupported_configs_name_the_subproc_backend(kwargs, message):
     assert "backend='subproc'" in str(e.value)
 
 
-def test_a_recv_timeout_is_refused_and_leaves_the_step_in_flight():
+def test_a_timeout_is_refused_before_anything_is_sent():
     with stori_jax.make("Breakout", num_envs=2, seed=0, obs="ram", **EP) as env:
+        with pytest.raises(ValueError, match=r"reset\(timeout=...\) needs backend='subproc'"):
+            env.reset(timeout=1.0)
         env.reset()
-        env.send(np.zeros(2, np.int32))
+        with pytest.raises(ValueError, match=r"step\(timeout=...\) needs backend='subproc'"):
+            env.step(np.zeros(2, np.int32), timeout=1.0)
+        env.send(np.zeros(2, np.int32))  # step() sent nothing
         with pytest.raises(ValueError, match=r"recv\(timeout=...\) needs backend='subproc'"):
             env.recv(timeout=1.0)
         env.recv()  # the step was neither lost nor half-done

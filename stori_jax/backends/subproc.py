@@ -34,6 +34,14 @@ class EnvClosedError(RuntimeError):
     """The environment was used after close()."""
 
 
+class WorkersLate(TimeoutError):
+    """Workers did not reply within a recv timeout; the command stays in flight."""
+
+    def __init__(self, what: str, workers: list[int], pids: list[int]):
+        self.what, self.workers, self.pids = what, workers, pids
+        super().__init__(f"emulator worker(s) {workers} (pids {pids}) did not finish {what}")
+
+
 def split_batch(num_envs: int, num_workers: int) -> list[tuple[int, int]]:
     """Contiguous [lo, hi) env ranges, as even as possible."""
     base, extra = divmod(num_envs, num_workers)
@@ -191,11 +199,7 @@ class SubprocBackend:
                 ready = wait(list(waiting.values()) + list(sentinels), timeout=left)
                 if not ready:
                     late = sorted(waiting)
-                    raise TimeoutError(
-                        f"emulator worker(s) {late} (pids "
-                        f"{[self.processes[w].pid for w in late]}) did not finish {what} within "
-                        f"{timeout:g} s; it is still in flight: call recv() again to keep "
-                        "waiting, or close() the env")
+                    raise WorkersLate(what, late, [self.processes[w].pid for w in late])
                 for obj in ready:
                     if obj in sentinels:
                         w = sentinels[obj]
@@ -231,8 +235,8 @@ class SubprocBackend:
         self._inline_command, self._what = b"S", "a step"
 
     def recv(self, timeout: float | None = None) -> dict[str, np.ndarray]:
-        """Wait for the workers (at most ``timeout`` seconds, then TimeoutError with the command
-        still pending); the returned views stay valid until the next send."""
+        """Wait for the workers (at most ``timeout`` seconds, then :class:`WorkersLate` with the
+        command still pending); the returned views stay valid until the next send."""
         if self.closed:
             raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
         if not self._pending:
