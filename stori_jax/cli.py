@@ -5,6 +5,7 @@ baseline, ``eval`` it (or the random policy) by the paper's protocol, ``table`` 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -163,8 +164,6 @@ def _cmd_show(args) -> int:
 def _cmd_record(args) -> int:
     from stori_jax.visual import record_episode
 
-    if args.episodes != 1:
-        raise ValueError(f"--episodes: recording supports 1 episode per file, got {args.episodes}")
     _check_show_record(args, "--max-steps", args.max_steps)
     name, config = _config_for(args)
     out = args.out or Path(f"{args.game}-{name}.gif")
@@ -174,6 +173,9 @@ def _cmd_record(args) -> int:
 
 
 BASELINE_COMMANDS = ("train", "eval", "table")
+GAME_HELP = "Breakout, Boxing, Gopher, BankHeist (or any ale-py game, without a preset)"
+PRESET_HELP = "paper preset, e.g. 2.1 or 3.2A (`stori-jax list` shows them)"
+SEED_HELP = "environment seed (default 0)"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -181,12 +183,14 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     sub.add_parser("list", help="print games, presets and modes")
     run = sub.add_parser("run", help="run a random policy on a preset and print a summary")
-    run.add_argument("game", help="Breakout, Boxing, Gopher, BankHeist (or any ale-py game)")
-    run.add_argument("preset", nargs="?", default=None, help="paper preset, e.g. 2.1 or 3.2A")
-    run.add_argument("--steps", type=int, default=500, help="agent steps per env")
-    run.add_argument("--num-envs", type=int, default=8)
-    run.add_argument("--num-workers", type=int, default=None)
-    run.add_argument("--seed", type=int, default=0)
+    run.add_argument("game", help=GAME_HELP)
+    run.add_argument("preset", nargs="?", default=None,
+                     help=PRESET_HELP + "; default 3.1, no stochasticity")
+    run.add_argument("--steps", type=int, default=500, help="agent steps per env (default 500)")
+    run.add_argument("--num-envs", type=int, default=8, help="envs stepped together (default 8)")
+    run.add_argument("--num-workers", type=int, default=None,
+                     help="emulator worker processes (default: from the machine's cores)")
+    run.add_argument("--seed", type=int, default=0, help=SEED_HELP)
     run.add_argument("--obs", default=None, choices=["raw", "atari84", "dreamer64", "ram"])
     run.add_argument("--granularity", default=None, choices=["frame", "step"])
     run.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -210,16 +214,19 @@ def build_parser() -> argparse.ArgumentParser:
     for command, helptext in (("show", "PNG contact sheet: the preset beside its 3.1 twin"),
                               ("record", "animated GIF of an episode with per-step overlay")):
         p = sub.add_parser(command, help=helptext)
-        p.add_argument("game")
-        p.add_argument("preset", nargs="?", default=None)
+        p.add_argument("game", help=GAME_HELP)
+        p.add_argument("preset", nargs="?", default=None, help=PRESET_HELP + "; or --config")
         p.add_argument("--config", default=None, help="a reference-format JSON file instead")
-        p.add_argument("--seed", type=int, default=0)
-        p.add_argument("--out", type=Path, default=None)
+        p.add_argument("--seed", type=int, default=0, help=SEED_HELP)
+        suffix = "png" if command == "show" else "gif"
+        p.add_argument("--out", type=Path, default=None,
+                       help=f"file to write (default <game>-<preset>.{suffix})")
         if command == "show":
-            p.add_argument("--steps", type=int, default=200, help="how far to play")
+            p.add_argument("--steps", type=int, default=200,
+                           help="agent steps to play before the picture (default 200)")
         else:
-            p.add_argument("--episodes", type=int, default=1)
-            p.add_argument("--max-steps", type=int, default=1000)
+            p.add_argument("--max-steps", type=int, default=1000,
+                           help="agent steps at most, if the episode is longer (default 1000)")
     from baselines.commands import add_parsers
 
     add_parsers(sub)  # train, eval, table
@@ -244,13 +251,33 @@ def main(argv: list[str] | None = None) -> int:
             return COMMANDS[args.command](args)
         check_int("--steps", args.steps, 1)
         return _cmd_run(args)
+    except BrokenPipeError:
+        # the reader went away (`stori-jax list | head`): stop quietly, and let no later write
+        # to stdout (Python's own flush at exit included) fail again
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
     except (ValueError, OSError) as e:  # bad input, or a path that cannot be read or written
         print(f"stori-jax: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("stori-jax: interrupted", file=sys.stderr)
-        return 130
+        return INTERRUPTED
+
+
+INTERRUPTED = 130  # the exit code of a command stopped by Ctrl-C, as a shell reports SIGINT
+
+
+def entry() -> None:
+    """The ``stori-jax`` console script: :func:`main`'s exit code.  After Ctrl-C, with every env
+    closed by then, it leaves without Python's shutdown: JAX/XLA (0.10) can crash there with a
+    segfault when the interrupt landed during a compilation, instead of exiting with 130."""
+    code = main()
+    if code == INTERRUPTED:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()

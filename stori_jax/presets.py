@@ -65,7 +65,8 @@ def _canonical_game(game: str) -> str:
         if isinstance(game, str) and g.lower() == game.lower():
             return g
     games = sorted({g for g, _ in _PRESETS})
-    raise ValueError(f"unknown game {game!r} for presets: allowed {games}")
+    raise ValueError(f"unknown game {game!r} for presets: allowed {games} (another ale-py game "
+                     "takes no preset, which plays it as 3.1, or a Config)")
 
 
 def preset(game: str, name: str) -> Config:

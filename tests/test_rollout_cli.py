@@ -1,7 +1,10 @@
 """rollout() stacking and determinism; the command line's list/run and its errors."""
 
+import os
+import signal
 import subprocess
 import sys
+import time
 
 import jax
 import numpy as np
@@ -9,6 +12,8 @@ import pytest
 
 import stori_jax
 from stori_jax.cli import main
+
+from _env_support import process_gone
 
 
 def random_policy(params, obs, key):
@@ -44,6 +49,16 @@ def test_rollout_rejects_bad_num_steps():
         traj = stori_jax.rollout(env, random_policy, {"num_actions": 4}, jax.random.PRNGKey(0),
                                  np.int64(2))
         assert traj.action.shape == (2, 1)
+        for bad, shown in ((np.zeros(128, np.uint8), r"shape \(128,\) and dtype uint8"),
+                           (np.zeros((1, 128), np.float32), r"shape \(1, 128\) and dtype float32")):
+            with pytest.raises(ValueError, match=r"obs must be the env's current observation, of "
+                                                 r"shape \(1, 128\) and dtype uint8 \(the last "
+                                                 rf"step's\), got {shown}"):
+                stori_jax.rollout(env, random_policy, {"num_actions": 4},
+                                  jax.random.PRNGKey(0), 2, obs=bad)
+        more = stori_jax.rollout(env, random_policy, {"num_actions": 4}, jax.random.PRNGKey(1),
+                                 1, obs=traj.last_obs)  # continuing a run
+        assert more.obs.shape == (1, 1, 128)
 
 
 def test_cli_list_prints_presets_and_modes(capsys):
@@ -73,3 +88,48 @@ def test_cli_run_prints_a_summary():
 def test_cli_bad_arguments_give_clear_errors(argv, message, capsys):
     assert main(argv) == 2
     assert message in capsys.readouterr().err
+
+
+def children(pid: int) -> list[int]:
+    """The process's direct children (Linux /proc)."""
+    kids = []
+    for task in os.listdir(f"/proc/{pid}/task"):
+        with open(f"/proc/{pid}/task/{task}/children") as f:
+            kids += [int(k) for k in f.read().split()]
+    return kids
+
+
+# the console script's function, started as a terminal would (default SIGINT handling)
+ENTRY = ("import signal; signal.signal(signal.SIGINT, signal.default_int_handler); "
+         "from stori_jax.cli import entry; entry()")
+
+
+@pytest.mark.timeout(90)
+def test_ctrl_c_stops_the_command_with_130_and_no_worker_left():
+    child = subprocess.Popen([sys.executable, "-c", ENTRY, "run", "Breakout", "--steps", "100000",
+                              "--num-envs", "2", "--num-workers", "2", "--quiet"],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout.readline().startswith("Env(Breakout")  # made: workers started
+        time.sleep(1.0)
+        workers = children(child.pid)
+        assert len(workers) >= 2
+        child.send_signal(signal.SIGINT)
+        _, err = child.communicate(timeout=60)
+    finally:
+        child.kill()
+    assert child.returncode == 130, err
+    assert err.strip().endswith("stori-jax: interrupted")
+    deadline = time.monotonic() + 5
+    while not all(process_gone(p) for p in workers) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert all(process_gone(p) for p in workers)
+
+
+def test_a_closed_pipe_ends_the_command_quietly():
+    """`stori-jax list | head -1`: the reader goes away; no error message, exit code 1."""
+    child = subprocess.Popen([sys.executable, "-c", ENTRY, "list"], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    child.stdout.close()  # before the command writes
+    err = child.stderr.read()
+    assert child.wait(timeout=60) == 1 and err == ""

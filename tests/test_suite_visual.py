@@ -52,7 +52,6 @@ def test_record_writes_an_animated_gif(tmp_path):
     (["suite", "--episodes", "0"], "--episodes must be >= 1"),
     (["show", "Breakout"],
      "give a PRESET (e.g. 3.1; `stori-jax list` shows them) or --config FILE"),
-    (["record", "Breakout", "1", "--episodes", "2"], "recording supports 1 episode"),
 ])
 def test_bad_arguments(argv, message, capsys):
     assert main(argv) == 2
