@@ -3,6 +3,7 @@ line, registered by :mod:`stori_jax.cli`."""
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -86,10 +87,13 @@ def cmd_train(args) -> int:
 
     check_int("--eval-episodes", args.eval_episodes, 0)
     overrides = _parse_overrides(args.overrides)
-    for flag, field in (("--game", "game"), ("--preset", "preset"), ("--seed", "seed"),
-                        ("--steps", "total_steps")):
-        if field in overrides:
-            raise ValueError(f"set {field} with {flag}, not --set")
+    flags = {"game": "--game", "preset": "--preset", "seed": "--seed", "total_steps": "--steps"}
+    settable = sorted(f.name for f in dataclasses.fields(PPOConfig) if f.name not in flags)
+    for name in overrides:
+        if name in flags:
+            raise ValueError(f"set {name} with {flags[name]}, not --set")
+        if name not in settable:
+            raise ValueError(f"unknown PPO hyperparameter {name!r}; --set takes {settable}")
     config = PPOConfig.from_overrides(
         PPOConfig(game=args.game, preset=args.preset, seed=args.seed, total_steps=args.steps),
         overrides)
@@ -98,6 +102,10 @@ def cmd_train(args) -> int:
     if not args.resume and (out / "checkpoint.pkl").exists():
         raise ValueError(f"{out} already holds a run: pass --resume to continue it, or another "
                          "--out")
+    trained = config.num_iterations * config.batch_size
+    if trained != config.total_steps:
+        print(f"stori-jax: --steps {config.total_steps} rounds up to {trained} agent steps, whole "
+              f"iterations of num_envs x num_steps = {config.batch_size}", file=sys.stderr)
     try:
         summary = train(config, out, resume=args.resume, progress=not args.quiet)
     except KeyboardInterrupt:

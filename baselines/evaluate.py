@@ -21,6 +21,7 @@ from stori_jax.checks import check_int
 POLICIES = ("sampled", "greedy", "random")
 EVAL_SEED_OFFSET = 10_000  # evaluation seed = training seed + this, unless given
 EVAL_NUM_ENVS = 20  # envs of an evaluation (the recorded evaluations used this many)
+STEPS_SHOWN_EVERY = 250  # the progress bar shows the agent steps played every this many steps
 
 
 def episode_quotas(episodes: int, num_envs: int) -> np.ndarray:
@@ -70,6 +71,8 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
             key, k = jax.random.split(key)
             obs, _, terminated, truncated, info = env.step(choose(obs, k))
             agent_steps += num_envs
+            if agent_steps % (STEPS_SHOWN_EVERY * num_envs) == 0:  # long episodes show progress
+                bar.set_postfix_str(f"{agent_steps} agent steps")
             done = np.flatnonzero(np.asarray(terminated | truncated))
             if done.size:
                 ret, length = np.asarray(info["episode_return"]), np.asarray(info["episode_length"])

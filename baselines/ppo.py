@@ -506,10 +506,12 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
         update = make_update(network, optimizer, config)
         if resume:
             ckpt = load_checkpoint(ckpt_path)
-            if PPOConfig.from_recorded(ckpt["config"]) != config:
-                raise ValueError(f"--resume: {ckpt_path} was trained with a different config:"
-                                 f"\n  checkpoint: {ckpt['config']}\n  now: "
-                                 f"{dataclasses.asdict(config)}")
+            recorded = dataclasses.asdict(PPOConfig.from_recorded(ckpt["config"]))
+            differ = [f"{k} {recorded[k]!r} there, {v!r} now"
+                      for k, v in dataclasses.asdict(config).items() if recorded[k] != v]
+            if differ:
+                raise ValueError(f"--resume: {ckpt_path} was trained with a different config: "
+                                 + "; ".join(differ))
             missing = [k for k in RESUME_STATE if k not in ckpt]
             if missing:
                 raise ValueError(f"--resume: {ckpt_path} lacks {missing}, which a run needs to "

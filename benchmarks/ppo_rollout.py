@@ -3,7 +3,7 @@ random actions (no network), PPO's rollout with agent compute overlapping emulat
 half-batches stepped in turn, as baselines/ppo.py does), the same rollout without overlap (one
 batch: choose, then step), and the jitted update.  Writes JSON and a markdown table.
 
-    python benchmarks/ppo_rollout.py [--game Breakout] [--network nips] [--repeats 3]
+    python benchmarks/ppo_rollout.py [--game Breakout] [--network nips] [--repeats 3] [--out DIR]
 """
 
 from __future__ import annotations
@@ -118,16 +118,19 @@ def main() -> None:
     parser.add_argument("--preset", default="3.1")
     parser.add_argument("--network", default="nips", choices=list(ppo.NETWORKS))
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--out", type=Path, default=RESULTS, help="directory for the results")
     args = parser.parse_args()
     config = ppo.PPOConfig(game=args.game, preset=args.preset,
                            **{**EVIDENCE_HYPERPARAMETERS, "network": args.network})
     results = measure(config, args.repeats)
     text = markdown(config, results)
     print(text)
-    stem = RESULTS / f"ppo-rollout-{datetime.date.today().isoformat()}-{args.game}-{args.network}"
-    RESULTS.mkdir(exist_ok=True)
+    day = datetime.date.today().isoformat()
+    stem = args.out / f"ppo-rollout-{day}-{args.game}-{args.network}"
+    args.out.mkdir(parents=True, exist_ok=True)
     stem.with_suffix(".json").write_text(json.dumps(dict(
-        config=vars(args), machine=platform.processor() or platform.machine(),
+        config={**vars(args), "out": str(args.out)},
+        machine=platform.processor() or platform.machine(),
         results=results), indent=1))
     stem.with_suffix(".md").write_text(text)
     plot(stage_rates(results), stem.with_suffix(".png"), title=text.splitlines()[0])

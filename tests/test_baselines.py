@@ -233,7 +233,7 @@ def test_same_seed_same_updates_other_seed_others(uninterrupted, tmp_path):
 def test_resume_refuses_another_config(uninterrupted, tmp_path):
     full, _ = uninterrupted
     ppo.train(tiny(total_steps=64), tmp_path, progress=False)
-    with pytest.raises(ValueError, match="different config"):
+    with pytest.raises(ValueError, match=r"different config: ent_coef \S+ there, 0\.5 now$"):
         ppo.train(tiny(total_steps=64, ent_coef=0.5), tmp_path, resume=True, progress=False)
     with pytest.raises(ValueError, match="does not exist"):
         ppo.train(tiny(), tmp_path / "nothing", resume=True, progress=False)
@@ -341,7 +341,8 @@ def test_smoothing_is_the_mean_of_the_latest_episodes():
     (["train", "ppo", "--game", "Pong2"], "unknown game"),
     (["train", "ppo", "--game", "Breakout", "--preset", "4"], "preset"),
     (["train", "ppo", "--game", "Breakout", "--set", "lr"], "FIELD=VALUE"),
-    (["train", "ppo", "--game", "Breakout", "--set", "nope=1"], "unknown PPO hyperparameter"),
+    (["train", "ppo", "--game", "Breakout", "--set", "nope=1"],
+     "unknown PPO hyperparameter 'nope'; --set takes ['action_head', "),
     (["train", "ppo", "--game", "Breakout", "--set", "seed=3"], "--seed"),
     (["train", "ppo", "--game", "Breakout", "--steps", "0"], "total_steps"),
     (["eval"], "--checkpoint PATH or --random"),
