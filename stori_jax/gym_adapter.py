@@ -28,6 +28,13 @@ def _numpy_info(info: dict) -> dict:
     return jax.tree.map(np.asarray, info)
 
 
+def _first_env_info(info: dict) -> dict:
+    """The single env's info: env 0's entry of every batched leaf (``labels`` included)."""
+    import jax
+
+    return jax.tree.map(lambda v: np.asarray(v)[0], info)
+
+
 class _Owner:
     """Holds one stori_jax Env and re-makes it when reset() asks for another seed."""
 
@@ -54,6 +61,9 @@ class _Owner:
 
     def _reseed(self, seed):
         """An explicit seed restarts everything (emulators and key) from that seed."""
+        if isinstance(seed, (list, tuple, np.ndarray)):
+            raise ValueError(f"seed must be one int for all envs (env i's emulator seed derives "
+                             f"from it and i); per-env seed lists are not supported, got {seed!r}")
         if seed is not None and not (self._fresh and seed == self._seed):
             self._env.close()
             self._seed = seed
@@ -63,6 +73,10 @@ class _Owner:
     def close(self, **kwargs):
         if getattr(self, "_env", None) is not None:
             self._env.close()
+
+    def render(self):
+        raise NotImplementedError("stori_jax envs do not render: `stori-jax record GAME PRESET` "
+                                  "writes an episode as a GIF, and obs='raw' gives RGB frames")
 
 
 class StoriGymEnv(_Owner, gym.Env):
@@ -80,8 +94,7 @@ class StoriGymEnv(_Owner, gym.Env):
         super().reset(seed=seed)
         self._reseed(seed)
         obs, info = self._env.reset()
-        return np.asarray(obs[0]), {k: v[0] for k, v in _numpy_info(info).items()
-                                    if not isinstance(v, dict)}
+        return np.asarray(obs[0]), _first_env_info(info)
 
     def step(self, action):
         a = np.asarray(action)
@@ -89,9 +102,8 @@ class StoriGymEnv(_Owner, gym.Env):
             raise ValueError(f"action must be one int in [0, {self.action_space.n - 1}], "
                              f"got {action!r}")
         obs, reward, terminated, truncated, info = self._env.step(a.reshape(1))
-        info = {k: v[0] for k, v in _numpy_info(info).items() if not isinstance(v, dict)}
         return (np.asarray(obs[0]), float(reward[0]), bool(terminated[0]), bool(truncated[0]),
-                info)
+                _first_env_info(info))
 
 
 class StoriVectorEnv(_Owner, VectorEnv):

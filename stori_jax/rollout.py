@@ -37,6 +37,12 @@ def rollout(env, policy_fn: Callable[[Any, jax.Array, jax.Array], jax.Array], pa
     policy = jax.jit(policy_fn)
     if obs is None:
         obs, _ = env.reset()
+    else:
+        space = env.observation_space
+        if tuple(jnp.shape(obs)) != space.shape or jnp.result_type(obs) != space.dtype:
+            raise ValueError(f"obs must be the env's current observation, of shape {space.shape} "
+                             f"and dtype {space.dtype} (the last step's), got shape "
+                             f"{tuple(jnp.shape(obs))} and dtype {jnp.result_type(obs)}")
     steps = []
     for _ in range(num_steps):
         key, step_key = jax.random.split(key)

@@ -23,6 +23,12 @@ def test_single_env_follows_gymnasium_api():
         obs, reward, terminated, truncated, info = env.step(0)
         assert isinstance(reward, float) and isinstance(terminated, bool)
         assert env.observation_space.contains(obs)
+        # the batched info, env 0's entry of every leaf (the type-0 labels too)
+        assert info["labels"].keys() == set(stori_jax.get_game("Gopher").labels)
+        assert all(np.shape(v) == () for v in info["labels"].values())
+        assert info["ram"].shape == (128,) and np.shape(info["event_fired"]) == ()
+        with pytest.raises(NotImplementedError, match="stori-jax record"):
+            env.unwrapped.render()
         with pytest.raises(ValueError, match=r"action must be one int in \[0, 7\]"):
             env.step(8)
         with pytest.raises(ValueError, match="action must be one int"):
@@ -71,6 +77,8 @@ def test_vector_env_next_step_autoreset():
             if (terminated | truncated).any():
                 done_at, done_env = t, int(np.flatnonzero(terminated | truncated)[0])
         assert done_at is not None, "no Breakout episode ended under random play"
+        with pytest.raises(ValueError, match="seed must be one int for all envs"):
+            envs.reset(seed=[0, 1])
     finally:
         envs.close()
 
