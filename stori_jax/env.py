@@ -11,12 +11,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from stori_jax.backends.layout import RAM_SIZE, SCREEN
 from stori_jax.backends.subproc import (EnvClosedError, InterruptedStepError, SubprocBackend,
                                         WorkersLate)
 from stori_jax.checks import check_int, check_real
 from stori_jax.config import Config, GRANULARITIES
 from stori_jax.core import (Draws, EnvState, WorkerOutputs, after_step, before_step,
                             initial_state, push_frames)
+from stori_jax.functional.preprocess import ATARI84, DREAMER64, STACK
 from stori_jax.games import get_game
 from stori_jax.plan import OBS_KINDS, Plan, compile_plan
 from stori_jax.presets import preset as get_preset
@@ -106,10 +108,14 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
         plan = dataclasses.replace(plan, frames_layout=FRAMES_LAYOUT)
         # raises a clear ValueError naming what needs the subproc backend
         return Env(plan, cfg, seed, make_envpool_backend(plan, seed, max_episode_frames))
-    inline_envs = check_int("inline_envs", inline_envs, 0) if inline_envs is not None else None
+    if inline_envs is not None:  # every worker needs at least one env
+        inline_envs = check_int("inline_envs", inline_envs, 0, num_envs - 1)
     if num_workers is None:
         num_workers, default_inline = default_split(num_envs, _available_cores())
-        inline_envs = default_inline if inline_envs is None else inline_envs
+        if inline_envs is None:
+            inline_envs = default_inline
+        else:  # the envs left to the workers bound how many there can be
+            num_workers = min(num_workers, num_envs - inline_envs)
     inline_envs = inline_envs or 0
     num_workers = check_int("num_workers", num_workers, 1)
     if num_workers > num_envs:
@@ -160,8 +166,8 @@ def _available_cores() -> int:
 
 
 def observation_space(plan: Plan) -> gym.spaces.Box:
-    shape = {"raw": (210, 160, 3), "atari84": (84, 84, 4), "dreamer64": (64, 64, 3),
-             "ram": (128,)}[plan.obs]
+    shape = {"raw": SCREEN, "atari84": (ATARI84, ATARI84, STACK),
+             "dreamer64": (DREAMER64, DREAMER64, 3), "ram": (RAM_SIZE,)}[plan.obs]
     return gym.spaces.Box(0, 255, (plan.num_envs,) + shape, np.uint8)
 
 

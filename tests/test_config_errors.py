@@ -45,6 +45,12 @@ def test_game_not_a_string(name):
 def test_game_aliases():
     assert get_game("bank_heist") is get_game("BankHeist") is get_game("bankheist")
     assert get_game("Pong").num_actions == 6  # any ale-py game: game-agnostic modes only
+    # one spec per game, however it is spelled, named from its ROM id
+    assert get_game("pong") is get_game("Pong") and get_game("Pong").name == "Pong"
+    assert get_game("space_invaders") is get_game("SpaceInvaders")
+    assert get_game("space_invaders").name == "SpaceInvaders"
+    with pytest.raises(ValueError, match=r"game must be a non-empty string, got \['Pong'\]"):
+        get_game(["Pong"])
 
 
 # -- game-specific modes -----------------------------------------------------------------------

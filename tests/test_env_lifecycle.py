@@ -362,7 +362,9 @@ def test_step_before_reset_and_send_recv_misuse():
     (dict(game="Breakout", num_workers=0), r"num_workers must be >= 1"),
     (dict(game="Breakout", num_envs=2, num_workers=2, inline_envs=1),
      r"num_workers \(2\) \+ inline_envs \(1\) must be <= num_envs \(2\)"),
-    (dict(game="Breakout", num_envs=2, inline_envs=-1), r"inline_envs must be >= 0"),
+    (dict(game="Breakout", num_envs=2, inline_envs=-1), r"inline_envs must be in \[0, 1\], got -1"),
+    (dict(game="Breakout", num_envs=2, inline_envs=2), r"inline_envs must be in \[0, 1\], got 2"),
+    (dict(game=["Breakout"]), r"game must be a non-empty string, got \['Breakout'\]"),
     (dict(game="Breakout", num_envs=0), r"num_envs must be >= 1"),
     (dict(game="Breakout", granularity="episode"),
      r"granularity must be one of \['frame', 'step'\]"),
@@ -503,3 +505,21 @@ def test_an_interrupted_reset_says_reset_again():
     finally:
         env.close()
         twin.close()
+
+
+def test_inline_envs_alone_leaves_the_workers_the_rest(monkeypatch):
+    """Only inline_envs given, on a machine with many cores: the default worker count shrinks to
+    the envs left to the workers, instead of an error about a num_workers nobody passed."""
+    monkeypatch.setattr("stori_jax.env._available_cores", lambda: 16)
+    with make("Breakout", num_envs=4, num_workers=None, inline_envs=2) as env:
+        assert len(env.backend.pids) == 2
+        env.reset()
+        obs, *_ = env.step(np.zeros(4, np.int32))
+        assert obs.shape == (4, 128)
+
+
+def test_a_config_bound_to_another_spelling_of_the_game_fits():
+    with make("Pong", Config(game="pong", action_noise=stori_jax.ActionNoise(0.25))) as env:
+        assert env.plan.game == "Pong"
+        env.reset()
+        assert env.step(np.zeros(2, np.int32))[0].shape == (2, 128)

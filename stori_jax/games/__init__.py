@@ -14,6 +14,7 @@ from stori_jax.games.base import GameSpec, Region  # noqa: F401  (re-exported)
 STORI_GAMES = ("Breakout", "Boxing", "Gopher", "BankHeist")
 
 
+@functools.lru_cache(maxsize=None)
 def _stori_specs() -> dict[str, GameSpec]:
     from stori_jax.games import bankheist, boxing, breakout, gopher
 
@@ -32,9 +33,9 @@ def ale_rom_ids() -> tuple[str, ...]:
     return tuple(roms.get_all_rom_ids())
 
 
-@functools.lru_cache(maxsize=None)
 def get_game(name: str) -> GameSpec:
-    """The GameSpec of ``name`` (a STORI game, or any ale-py game id such as 'Pong' or 'pong')."""
+    """The GameSpec of ``name`` (a STORI game, or any ale-py game id such as 'Pong' or 'pong';
+    one spec per game, however it is spelled)."""
     if not isinstance(name, str) or not name:
         raise ValueError(f"game must be a non-empty string, got {name!r}")
     specs = _stori_specs()
@@ -46,6 +47,13 @@ def get_game(name: str) -> GameSpec:
         raise ValueError(f"unknown game {name!r}: allowed are the STORI games {list(STORI_GAMES)} "
                          f"or any ale-py game id (e.g. 'Pong', 'space_invaders'); "
                          f"{len(ale_rom_ids())} ids ship with ale-py")
+    return _other_game(rom_id)
+
+
+@functools.lru_cache(maxsize=None)
+def _other_game(rom_id: str) -> GameSpec:
+    """A game outside STORI, named from its ROM id: 'space_invaders' -> 'SpaceInvaders'."""
+    name = "".join(part.capitalize() for part in rom_id.split("_"))
     return GameSpec(name=name, rom_id=rom_id, num_actions=_minimal_action_count(rom_id))
 
 
