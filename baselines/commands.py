@@ -7,7 +7,7 @@ import dataclasses
 import sys
 from pathlib import Path
 
-from baselines.evaluate import EVAL_NUM_ENVS
+from baselines.evaluate import CHECKPOINT_POLICIES, EVAL_NUM_ENVS
 
 
 def add_parsers(sub) -> None:
@@ -38,7 +38,7 @@ def add_parsers(sub) -> None:
                     help="training seed the result is filed under (default: the checkpoint's; "
                          "0 for --random)")
     ev.add_argument("--episodes", type=int, default=100)
-    ev.add_argument("--policy", choices=["sampled", "greedy"], default=None,
+    ev.add_argument("--policy", choices=list(CHECKPOINT_POLICIES), default=None,
                     help="how a checkpoint acts (default sampled)")
     ev.add_argument("--eval-seed", type=int, default=None,
                     help="environment seed of the evaluation (default: training seed + 10000)")
@@ -54,7 +54,7 @@ def add_parsers(sub) -> None:
                                          "learning curves")
     table.add_argument("results_dir", type=Path)
     table.add_argument("--out", type=Path, default=None, help="default: RESULTS_DIR")
-    table.add_argument("--policy", choices=["sampled", "greedy"], default="sampled",
+    table.add_argument("--policy", choices=list(CHECKPOINT_POLICIES), default="sampled",
                        help="which PPO evaluation the table shows")
 
 

@@ -18,7 +18,8 @@ import numpy as np
 
 from stori_jax.checks import check_int
 
-POLICIES = ("sampled", "greedy", "random")
+CHECKPOINT_POLICIES = ("sampled", "greedy")  # how a trained policy acts
+POLICIES = CHECKPOINT_POLICIES + ("random",)
 EVAL_SEED_OFFSET = 10_000  # evaluation seed = training seed + this, unless given
 EVAL_NUM_ENVS = 20  # envs of an evaluation (the recorded evaluations used this many)
 STEPS_SHOWN_EVERY = 250  # the progress bar shows the agent steps played every this many steps

@@ -27,6 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from baselines.evaluate import CHECKPOINT_POLICIES
 from stori_jax.checks import check_int, check_real
 
 NETWORKS = ("nature", "nips", "tiny")
@@ -615,8 +616,8 @@ def env_only_sps(config: PPOConfig, agent_steps: int = 2048) -> float:
 def load_policy(checkpoint: Path, mode: str = "sampled"):
     """(config, policy(obs, key) -> (B,) int32 actions) of a checkpoint, acting ``sampled``
     (from its distribution) or ``greedy`` (argmax), jitted."""
-    if mode not in ("sampled", "greedy"):
-        raise ValueError(f"mode must be 'sampled' or 'greedy', got {mode!r}")
+    if mode not in CHECKPOINT_POLICIES:
+        raise ValueError(f"mode must be one of {list(CHECKPOINT_POLICIES)}, got {mode!r}")
     ckpt = load_checkpoint(checkpoint)
     config = PPOConfig.from_recorded(ckpt["config"])
     import stori_jax

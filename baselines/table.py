@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from baselines.evaluate import CHECKPOINT_POLICIES
 from stori_jax.checks import check_int, check_real
 
 # STORI_SPEC section 11: mean evaluation return ± std over seeds 0, 7, 13 at 100k agent steps
@@ -100,8 +101,9 @@ def load_evaluations(results_dir: Path) -> list[dict]:
 def aggregate(evaluations: list[dict], ppo_policy: str = "sampled") -> list[dict]:
     """One row per (game, preset): per agent, the mean over seeds of each seed's mean return,
     and the standard deviation over seeds (ddof=1, as usual for 'mean ± std over 3 seeds')."""
-    if ppo_policy not in ("sampled", "greedy"):
-        raise ValueError(f"ppo_policy must be 'sampled' or 'greedy', got {ppo_policy!r}")
+    if ppo_policy not in CHECKPOINT_POLICIES:
+        raise ValueError(f"ppo_policy must be one of {list(CHECKPOINT_POLICIES)}, "
+                         f"got {ppo_policy!r}")
     per_cell = defaultdict(lambda: defaultdict(dict))
     for e in evaluations:
         column = "Random" if e["agent"] == "random" else (

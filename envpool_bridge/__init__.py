@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from stori_jax.backends.layout import SCREEN, buffer_specs
 from stori_jax.backends.subproc import EnvClosedError
 
 FRAMES_LAYOUT = "pooled_chw"  # (B, 3, 210, 160): envpool's max-pooled screen, channels first
@@ -51,7 +52,7 @@ class EnvpoolBackend:
 
     frames_layout = FRAMES_LAYOUT
 
-    def __init__(self, plan, seed: int, max_episode_frames: int, num_threads: int | None = None):
+    def __init__(self, plan, seed: int, max_episode_frames: int):
         try:
             import envpool
         except ImportError as e:
@@ -65,7 +66,7 @@ class EnvpoolBackend:
         try:
             self.pool = envpool.make(
                 task, env_type="gymnasium", num_envs=b, batch_size=b, seed=seed,
-                num_threads=num_threads or 0, img_height=210, img_width=160, gray_scale=False,
+                num_threads=0, img_height=SCREEN[0], img_width=SCREEN[1], gray_scale=False,
                 stack_num=1, frame_skip=plan.frame_skip, noop_max=plan.noop_max + 1,
                 episodic_life=False, reward_clip=False, repeat_action_probability=0.0,
                 use_fire_reset=False, full_action_space=False,
@@ -73,24 +74,10 @@ class EnvpoolBackend:
         except Exception as e:  # envpool raises bare errors for unknown tasks
             raise ValueError(f"envpool has no Atari task {task!r} for game {plan.game!r}") from e
         self.num_envs = b
-        self.views = {
-            "executed": np.zeros((b, plan.frame_skip), np.int32),
-            "event_u": np.zeros((b, plan.frame_skip, 2), np.float32),
-            "event_active": np.zeros(b, np.uint8),
-            "ram_render": np.zeros(b, np.uint8),
-            "noops": np.zeros(b, np.int32),
-            "reset_first": np.zeros(b, np.uint8),
-            "frames": np.zeros((b, 3, 210, 160), np.uint8),
-            "ram": np.zeros((b, 128), np.uint8),
-            "reward": np.zeros(b, np.float32),
-            "terminated": np.zeros(b, np.uint8),
-            "truncated": np.zeros(b, np.uint8),
-            "lives": np.zeros(b, np.int32),
-            "event_fired": np.zeros(b, np.int32),
-            "ram_rendered": np.zeros(b, np.uint8),
-            "episode_return": np.zeros(b, np.float32),
-            "episode_length": np.zeros(b, np.int32),
-        }
+        # the subproc backend's buffers, but one max-pooled screen per env, channels first
+        self.views = {name: np.zeros(shape, dtype)
+                      for name, (shape, dtype) in buffer_specs(b, plan.frame_skip).items()}
+        self.views["frames"] = np.zeros((b, SCREEN[2]) + SCREEN[:2], np.uint8)
         self._running_return = np.zeros(b, np.float64)
         self._running_length = np.zeros(b, np.int64)
         self._pending = None
@@ -99,10 +86,6 @@ class EnvpoolBackend:
     @property
     def closed(self) -> bool:
         return self._closed
-
-    @property
-    def pids(self) -> list[int]:
-        return []  # envpool runs threads inside this process
 
     def _check(self):
         if self._closed:

@@ -10,18 +10,20 @@ import sys
 from pathlib import Path
 
 from stori_jax.checks import check_int
+from stori_jax.config import GRANULARITIES
+from stori_jax.plan import OBS_KINDS
 
 
 def _cmd_list(args) -> int:
     from stori_jax import STORI_GAMES, describe_preset, get_game, list_presets
-    from stori_jax.functional.masks import CROP_REGIONS, TORCH_MODE
+    from stori_jax.functional.masks import CROP_REGIONS, TORCH_MODE, TORCH_RADIUS
 
     print("Presets (game, name: definition):")
     for game, name in list_presets():
         print(f"  {game:<10} {name:<5} {describe_preset(game, name)}")
     print("\nCrop modes (every game): " + ", ".join(
         [f"{m} {'left right top bottom'.split()[m - 1]} half" for m in CROP_REGIONS]
-        + [f"{TORCH_MODE} torch (radius 75)"]))
+        + [f"{TORCH_MODE} torch (radius {TORCH_RADIUS})"]))
     for game in STORI_GAMES:
         spec = get_game(game)
         print(f"\n{game} ({spec.num_actions} actions)")
@@ -191,12 +193,12 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--num-workers", type=int, default=None,
                      help="emulator worker processes (default: from the machine's cores)")
     run.add_argument("--seed", type=int, default=0, help=SEED_HELP)
-    run.add_argument("--obs", default=None, choices=["raw", "atari84", "dreamer64", "ram"])
-    run.add_argument("--granularity", default=None, choices=["frame", "step"])
+    run.add_argument("--obs", default=None, choices=list(OBS_KINDS))
+    run.add_argument("--granularity", default=None, choices=list(GRANULARITIES))
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
-    suite = sub.add_parser("suite", help="every paper preset with a random agent: table, JSON, "
-                                         "gallery")
+    suite = sub.add_parser("suite", help="every paper preset with a random agent (or a PPO "
+                                         "checkpoint's): table, JSON, gallery")
     suite.add_argument("--games", nargs="+", default=None, help="a subset of the games")
     suite.add_argument("--presets", nargs="+", default=None, help="a subset of preset names")
     suite.add_argument("--episodes", type=int, default=8, help="episodes per preset")

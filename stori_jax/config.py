@@ -22,11 +22,12 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping
 
 from .checks import check_int, check_probability
+from .games import get_game
+from .games.base import CROP_MODES
 
 GRANULARITIES = ("frame", "step")
 DRIFT_SCHEDULES = ("sudden", "cyclic", "gradual")
 MASK_KINDS = ("crop", "blackout", "ram")
-CROP_MODES = (1, 2, 3, 4, 5)  # 0 ("none") is expressed by leaving the mask out
 TAXONOMY_TYPES = ("0", "1", "2.1", "2.2", "3.1", "3.2")
 SECONDARY_TYPES = ("1", "2.1", "3.2")
 
@@ -180,7 +181,7 @@ class Config:
         if self.drift is not None:
             self._check_secondary(self.drift.secondary)
         if self.game is not None:
-            _game_spec(self.game).validate(self)
+            get_game(self.game).validate(self)
 
     def _check_secondary(self, secondary: "Config") -> None:
         """Concept 2 lives inside this config: nothing it sets may be ignored or contradict it."""
@@ -196,7 +197,7 @@ class Config:
                              f"used: both concepts draw events at Config.granularity "
                              f"({self.granularity!r}); set it there")
         if secondary.game is not None and self.game is not None \
-                and _game_spec(secondary.game).rom_id != _game_spec(self.game).rom_id:
+                and get_game(secondary.game).rom_id != get_game(self.game).rom_id:
             raise ValueError(f"Config.drift.secondary is bound to game {secondary.game!r} but "
                              f"Config.game is {self.game!r}; a drift stays in one game")
 
@@ -252,12 +253,6 @@ class Config:
         from stori_jax.reference_format import config_from_reference
 
         return config_from_reference(d, game=game)
-
-
-def _game_spec(game: str):
-    from stori_jax.games import get_game  # local import: games imports nothing of ours
-
-    return get_game(game)
 
 
 def _describe_part(part) -> str:

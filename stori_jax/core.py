@@ -15,6 +15,7 @@ import jax.numpy as jnp
 
 from stori_jax import functional as F
 from stori_jax.backends.layout import RESET_RENDER_BITS, STEP_RENDER_BITS
+from stori_jax.functional.preprocess import ATARI84, STACK
 from stori_jax.games import get_game
 from stori_jax.plan import Plan
 
@@ -44,7 +45,7 @@ class Draws(NamedTuple):
 
 def initial_state(plan: Plan, seed: int) -> EnvState:
     b = plan.num_envs
-    stack = (jnp.zeros((b, 84, 84, 4), jnp.uint8) if plan.obs == "atari84"
+    stack = (jnp.zeros((b, ATARI84, ATARI84, STACK), jnp.uint8) if plan.obs == "atari84"
              else jnp.zeros((b,), jnp.uint8))
     return EnvState(key=jax.random.PRNGKey(seed), episode_step=jnp.zeros((b,), jnp.int32),
                     prev_executed=jnp.zeros((b,), jnp.int32), stack=stack)

@@ -5,8 +5,9 @@ numpy) and ``gymnasium.make_vec`` (a gymnasium VectorEnv, autoreset mode NEXT_ST
     env = gym.make("stori_jax/Breakout-2.1-v0")
     envs = gym.make_vec("stori_jax/Breakout-2.1-v0", num_envs=8)
 
-Extra keyword arguments (``obs``, ``frame_skip``, ``granularity``, ``num_workers``,
-``max_episode_frames``, ``noop_max``, ``config``) go to :func:`stori_jax.make`.
+Extra keyword arguments (``obs``, ``frame_skip``, ``granularity``, ``backend``, ``num_workers``,
+``inline_envs``, ``max_episode_frames``, ``noop_max``) go to :func:`stori_jax.make`; the id fixes
+the game and the preset.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ The reference format is a nested dict (or the same flattened with dotted keys), 
     stochasticity_type: '1' | '2.1' | '2.2' | '3.1' | '3.2'
     intrinsic_stochasticity.action_dependent.stochastic_action_prob
     intrinsic_stochasticity.action_independent_random.mode / .random_stochasticity_prob
-    intrinsic_stochasticity.action_independent_concept_drift.temporal_mode ('sudden'|'cyclic'),
+    intrinsic_stochasticity.action_independent_concept_drift.temporal_mode ('sudden'|'cyclic'|'gradual'),
         .temporal_threshold, .secondary_concept_type ('1'|'2.1'|'3.2')
     partial_observation.type ('crop'|'blackout'|'ram'), .mode, .prob
 

@@ -1,7 +1,7 @@
 """Pictures of what a preset does: contact sheets (``show``) and episode recordings (``record``).
 
-Both run a preset beside its 3.1 twin (same seed, same executed actions, so the same game) with
-raw observations, and draw with Pillow.
+Both run a preset beside its 3.1 twin (same seed, same intended actions: what differs is what the
+preset does) with raw observations, and draw with Pillow.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import numpy as np
 
 from stori_jax.config import Config
 
-SCALE = 2  # screens are drawn at 2x (320x420)
+SCALE = 2  # a recording's screens are drawn at 2x (320x420); contact sheets at 1x
 
 
 def _pil():

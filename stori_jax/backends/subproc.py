@@ -1,4 +1,5 @@
-"""The ``subproc`` backend: W worker processes, each stepping B/W ALE emulators.
+"""The ``subproc`` backend: W worker processes, each stepping its share of the B ALE emulators
+(``inline_envs`` of them are stepped in the parent process itself while the workers run).
 
 Frames, RAM and flags travel through shared memory (no pickling); a one-byte Pipe message is the
 signal in each direction.  A worker that dies is noticed through its process sentinel, so the

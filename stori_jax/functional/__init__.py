@@ -1,6 +1,6 @@
 """Pure, jittable, batched functions: key in, arrays out (no Python loop over envs or pixels).
 
-Every function takes a batch of per-env keys (shape (B,), one key per env, see
+Every random function takes a batch of per-env keys (shape (B,), one key per env, see
 :func:`stori_jax.functional.keys.env_keys`) so that env i's randomness does not depend on the
 batch size, the number of workers or the backend.
 """

@@ -5,6 +5,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from stori_jax.config import DRIFT_SCHEDULES
+
 
 def concept2_probability(episode_step: jax.Array, schedule: str, period: int) -> jax.Array:
     """P(concept 2) at 0-indexed agent step k of the episode (exact 0/1 except for gradual)."""
@@ -15,7 +17,7 @@ def concept2_probability(episode_step: jax.Array, schedule: str, period: int) ->
         return ((k // period) % 2).astype(jnp.float32)
     if schedule == "gradual":
         return jnp.clip((k - period).astype(jnp.float32) / period, 0.0, 1.0)
-    raise ValueError(f"schedule must be one of ['sudden', 'cyclic', 'gradual'], got {schedule!r}")
+    raise ValueError(f"schedule must be one of {list(DRIFT_SCHEDULES)}, got {schedule!r}")
 
 
 def concept_of(keys: jax.Array, episode_step: jax.Array, schedule: str, period: int) -> jax.Array:

@@ -8,16 +8,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from stori_jax.games.base import SCREEN_HEIGHT, SCREEN_WIDTH, Region
-
-TORCH_RADIUS = 75
-CROP_REGIONS = {  # crop modes 1..4, fill black
-    1: (Region(0, 79, 0, SCREEN_HEIGHT - 1),),
-    2: (Region(80, SCREEN_WIDTH - 1, 0, SCREEN_HEIGHT - 1),),
-    3: (Region(0, SCREEN_WIDTH - 1, 0, 104),),
-    4: (Region(0, SCREEN_WIDTH - 1, 105, SCREEN_HEIGHT - 1),),
-}
-TORCH_MODE = 5
+from stori_jax.games.base import (CROP_REGIONS, SCREEN_HEIGHT, SCREEN_WIDTH,  # noqa: F401
+                                  TORCH_MODE, TORCH_RADIUS, Region)
 
 
 def region_mask(regions: Sequence[Region]) -> tuple[np.ndarray, np.ndarray]:

@@ -15,6 +15,7 @@ import numpy as np
 
 ATARI84 = 84
 STACK = 4
+FRAMES_LAYOUTS = ("pair", "pooled", "pooled_chw")  # how a backend hands over its screens
 DREAMER64 = 64
 
 
@@ -75,15 +76,15 @@ def area_resize(image, height: int, width: int, *, y_axis: int, x_axis: int):
 
 def pool_screens(frames, layout: str = "pair"):
     """The observed screen (B, 210, 160, 3) from a backend's frames: ``pair`` (2, B, H, W, 3)
-    (slot-major, as the workers write them) is max-pooled here, ``pooled`` (B, H, W, 3) was pooled by the backend, ``pooled_chw``
-    (B, 3, H, W) is transposed."""
+    (slot-major, as the workers write them) is max-pooled here, ``pooled`` (B, H, W, 3) was
+    pooled by the backend, ``pooled_chw`` (B, 3, H, W) is transposed."""
     if layout == "pair":
         return jnp.maximum(frames[0], frames[1])
     if layout == "pooled":
         return frames
     if layout == "pooled_chw":
         return jnp.moveaxis(frames, 1, -1)
-    raise ValueError(f"frames layout must be one of ['pair', 'pooled', 'pooled_chw'], got {layout!r}")
+    raise ValueError(f"frames layout must be one of {list(FRAMES_LAYOUTS)}, got {layout!r}")
 
 
 def atari84_frame(screen):

@@ -38,6 +38,18 @@ class Region:
         return Region(self.x0, self.x1, self.y0, self.y1, fill)
 
 
+# 3.2 crop modes, the same for every game: 1..4 black out a half of the screen, 5 is the torch
+CROP_REGIONS = {
+    1: (Region(0, 79, 0, SCREEN_HEIGHT - 1),),
+    2: (Region(80, SCREEN_WIDTH - 1, 0, SCREEN_HEIGHT - 1),),
+    3: (Region(0, SCREEN_WIDTH - 1, 0, 104),),
+    4: (Region(0, SCREEN_WIDTH - 1, 105, SCREEN_HEIGHT - 1),),
+}
+TORCH_MODE = 5
+TORCH_RADIUS = 75
+CROP_MODES = tuple(CROP_REGIONS) + (TORCH_MODE,)  # 0 ("none") is leaving the mask out
+
+
 @dataclass
 class EventOutcome:
     """What a post-frame rule did: RAM writes, whether it fired, and the reward consequences."""
