@@ -79,7 +79,7 @@ def test_a_killed_worker_raises_worker_error_quickly():
     with pytest.raises(stori_jax.WorkerError, match="died"):
         for _ in range(3):  # the first call may already have been sent to a live pipe
             env.step(np.zeros(4, np.int32))
-    assert time.monotonic() - start < 2.0
+    assert time.monotonic() - start < 10.0  # promptly (no hang), with room for a busy machine
     assert env.closed
     assert wait_gone(pids, 3.0)  # the surviving worker is stopped too
     with pytest.raises(stori_jax.EnvClosedError):
@@ -91,8 +91,7 @@ def test_an_interrupted_step_stays_in_flight_and_can_be_finished():
     """Ctrl-C while waiting for the emulators (a notebook interrupt): the step stays in flight;
     recv() finishes it with the right result, and later steps match an uninterrupted twin.
     (Before the fix the next step() took the interrupted step's replies as its own.)"""
-    kw = dict(frame_skip=1000)  # slow steps (~0.2 s), so that the interrupt lands in the wait
-    ev, twin = make("Breakout", **kw), make("Breakout", **kw)
+    ev, twin = make("Breakout"), make("Breakout")
     armed = threading.Event()
 
     def on_sigint(*_):
@@ -104,12 +103,13 @@ def test_an_interrupted_step_stays_in_flight_and_can_be_finished():
         ev.reset()
         twin.reset()
         actions = np.array([1, 2], np.int32)
-        ev.send(actions)
-        armed.set()
-        threading.Timer(0.02, os.kill, (os.getpid(), signal.SIGINT)).start()
-        with pytest.raises(KeyboardInterrupt):
-            ev.recv()
-        armed.clear()
+        with stopped(ev.backend.pids[0]):  # so that the interrupt surely lands in the wait
+            ev.send(actions)
+            armed.set()
+            threading.Timer(0.02, os.kill, (os.getpid(), signal.SIGINT)).start()
+            with pytest.raises(KeyboardInterrupt):
+                ev.recv()
+            armed.clear()
         with pytest.raises(RuntimeError, match="in flight"):
             ev.step(actions)
         expected = twin.step(actions)

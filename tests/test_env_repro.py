@@ -17,11 +17,12 @@ NUM_ENVS, NUM_STEPS = 4, 24
 
 CASES = {
     # a paper preset (type 1, p = 0.3, per frame), 84x84 stacked observations
-    "breakout-preset-1": dict(game="Breakout", preset="1", obs="atari84"),
+    "breakout-preset-1": dict(game="Breakout", preset="1", obs="atari84",
+                              max_episode_frames=40),
     # action noise + an event + a RAM-obs mask (rendered through cloneState/restoreState),
     # every draw per frame, random no-ops after each reset, 64x64 RGB observations
     "bankheist-mixed": dict(
-        game="BankHeist", obs="dreamer64", noop_max=20,
+        game="BankHeist", obs="dreamer64", noop_max=20, max_episode_frames=40,
         config=Config(action_noise=ActionNoise(0.3), event=RandomEvent(3, 0.05),
                       observation=ObservationMask("ram", 3, 0.5))),
 }
@@ -77,6 +78,8 @@ def test_same_seed_is_bit_identical_across_runs_and_worker_counts(name):
                       f"{name}: 1 worker vs 1 worker + 2 inline envs")
     # the run is genuinely random: every case corrupts actions, and some did in these steps
     assert first.stacked("action_corrupted").any(), name
+    # and it crosses episode ends (truncated at 40 frames): autoresets, their no-ops and draws
+    assert first.done.sum() >= 2 * NUM_ENVS, name
 
 
 @pytest.mark.parametrize("name", CASES)

@@ -282,6 +282,9 @@ def test_breakout_block_hit_cancel(mode):
     assert post(rule, start, start.copy(), start, u=0.0) == NO_EVENT
     # differs from start but nothing hit this frame
     assert post(rule, prev, prev.copy(), start, u=0.0) == NO_EVENT
+    # blocks changed this frame, but the wall is back at its start (a new wall after a cleared
+    # one): nothing is a hit to cancel
+    assert post(rule, prev, start.copy(), start, u=0.0) == NO_EVENT
 
 
 def test_breakout_regenerate_block():

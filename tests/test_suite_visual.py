@@ -35,9 +35,13 @@ def test_show_puts_the_mask_on_the_preset_side_only(tmp_path):
     x0, top = 6, 36 + 16
     twin = sheet[top:top + 210, x0:x0 + 160]
     preset = sheet[top + 210 + 6 + 16:top + 2 * 210 + 6 + 16, x0:x0 + 160]
-    band = (slice(105, 131), slice(8, 152))
-    assert (preset[band] == 0).all()
+    for rows in (slice(105, 131), slice(157, 183)):  # the top and bottom bands: black
+        assert (preset[rows, 8:152] == 0).all()
     np.testing.assert_array_equal(preset[:100], twin[:100])  # above the bands: untouched
+    # the middle band and the frame around the bands: untouched
+    np.testing.assert_array_equal(preset[131:157], twin[131:157])
+    np.testing.assert_array_equal(preset[105:183, :8], twin[105:183, :8])
+    np.testing.assert_array_equal(preset[105:183, 152:], twin[105:183, 152:])
 
 
 def test_record_writes_an_animated_gif(tmp_path):
