@@ -63,6 +63,51 @@ def assert_same_game(run, twin):
 
 
 # ---------------------------------------------------------------------------------------------
+# the default pipeline against a bare emulator
+# ---------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("game", ["Breakout", "Boxing"])
+def test_observations_are_the_max_of_a_steps_last_two_frames_on_a_bare_emulator(game):
+    """3.1 at frame_skip 4 (the default) beside a bare ale-py emulator fed the same actions:
+    'raw' is max(screen of frame 3, screen of frame 4) of each step, the reward is the sum over
+    the four frames, and atari84's newest frame is atari84_frame of that pooled screen."""
+    from stori_jax.functional import atari84_frame
+
+    seed, steps = 5, 40
+    kw = dict(num_envs=1, seed=seed, num_workers=1, inline_envs=0)
+    raw_env = stori_jax.make(game, obs="raw", **kw)
+    env84 = stori_jax.make(game, obs="atari84", **kw)
+    ale = new_ale(get_game(game).rom_id, emulator_seeds(seed, 1)[0])
+    actions = ale.getMinimalActionSet()
+    try:
+        raw, _ = raw_env.reset()
+        obs84, _ = env84.reset()
+        ale.reset_game()
+        np.testing.assert_array_equal(np.asarray(raw)[0], ale.getScreenRGB(), err_msg="reset")
+        pooled_differs = 0
+        for t, a in enumerate(random_actions(len(actions), steps, 1, seed=3)[:, 0]):
+            step = np.array([a], np.int32)
+            raw, reward, *_ = raw_env.step(step)
+            obs84, *_ = env84.step(step)
+            screens, total = [], 0
+            for _ in range(4):
+                total += ale.act(actions[a])
+                screens.append(ale.getScreenRGB().copy())
+            assert not ale.game_over()
+            expected = np.maximum(screens[2], screens[3])
+            pooled_differs += not np.array_equal(expected, screens[3])
+            np.testing.assert_array_equal(np.asarray(raw)[0], expected, err_msg=f"step {t}")
+            assert float(reward[0]) == total, f"step {t}"
+            np.testing.assert_array_equal(np.asarray(obs84)[0, ..., -1],
+                                          np.asarray(atari84_frame(expected[None]))[0],
+                                          err_msg=f"step {t}: atari84")
+        assert pooled_differs > 0, "the pooling should matter on some step"
+    finally:
+        raw_env.close()
+        env84.close()
+
+
+# ---------------------------------------------------------------------------------------------
 # RAM-obs modes: the screen is rendered from modified RAM, the game is untouched
 # ---------------------------------------------------------------------------------------------
 
