@@ -175,6 +175,7 @@ def _cmd_record(args) -> int:
 
 
 BASELINE_COMMANDS = ("train", "eval", "table")
+INTERRUPTED = 130  # the exit code of a command stopped by Ctrl-C, as a shell reports SIGINT
 GAME_HELP = "Breakout, Boxing, Gopher, BankHeist (or any ale-py game, without a preset)"
 PRESET_HELP = "paper preset, e.g. 2.1 or 3.2A (`stori-jax list` shows them)"
 SEED_HELP = "environment seed (default 0)"
@@ -264,9 +265,6 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("stori-jax: interrupted", file=sys.stderr)
         return INTERRUPTED
-
-
-INTERRUPTED = 130  # the exit code of a command stopped by Ctrl-C, as a shell reports SIGINT
 
 
 def entry() -> None:

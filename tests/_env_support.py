@@ -4,6 +4,7 @@ emulators, recorded as numpy arrays."""
 from __future__ import annotations
 
 import os
+import time
 from dataclasses import dataclass, field
 
 import jax
@@ -127,6 +128,16 @@ def process_gone(pid: int) -> bool:
     except ProcessLookupError:
         return True
     return False
+
+
+def wait_gone(pids, timeout=5.0) -> bool:
+    """Every process of ``pids`` is gone within ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if all(process_gone(pid) for pid in pids):
+            return True
+        time.sleep(0.05)
+    return all(process_gone(pid) for pid in pids)
 
 
 def new_ale(rom_id: str, seed: int = 0) -> ALEInterface:

@@ -19,16 +19,7 @@ import pytest
 import stori_jax
 from stori_jax import Config, ConceptDrift, ObservationMask
 
-from _env_support import make, process_gone
-
-
-def wait_gone(pids, timeout=5.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if all(process_gone(pid) for pid in pids):
-            return True
-        time.sleep(0.05)
-    return all(process_gone(pid) for pid in pids)
+from _env_support import make, process_gone, wait_gone
 
 
 def test_close_stops_every_worker_and_later_calls_raise():

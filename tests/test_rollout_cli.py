@@ -13,7 +13,7 @@ import pytest
 import stori_jax
 from stori_jax.cli import main
 
-from _env_support import binomial_ok, process_gone
+from _env_support import binomial_ok, wait_gone
 
 
 def random_policy(params, obs, key):
@@ -120,10 +120,7 @@ def test_ctrl_c_stops_the_command_with_130_and_no_worker_left():
         child.kill()
     assert child.returncode == 130, err
     assert err.strip().endswith("stori-jax: interrupted")
-    deadline = time.monotonic() + 5
-    while not all(process_gone(p) for p in workers) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert all(process_gone(p) for p in workers)
+    assert wait_gone(workers, 5.0)
 
 
 def test_a_closed_pipe_ends_the_command_quietly():
