@@ -6,9 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from stori_jax import ActionNoise, Config, ConceptDrift, ObservationMask
+from stori_jax import ActionNoise, Config, ConceptDrift, ObservationMask, RandomEvent
 
-from _env_support import NOOP, make, random_actions, run_env, run_lockstep
+from _env_support import (NOOP, breakout_tracker, last_ram, make, random_actions, run_env,
+                          run_lockstep)
 
 BREAKOUT_ALL = [(8, 151, 57, 92), (7, 152, 189, 195), (2, 158, 3, 16), (8, 151, 105, 130),
                 (8, 151, 131, 156), (8, 151, 157, 182)]  # Breakout blackout mode 1, black
@@ -103,3 +104,29 @@ def test_drift_to_action_noise_restarts_after_autoreset():
     executed = run.stacked("executed_action")
     assert (executed[concept == 0] == NOOP).all()
     assert (executed[concept == 1] != NOOP).any()
+
+
+def test_drift_to_an_event_keeps_the_episode_start_ram():
+    """STORI_SPEC 9b: the switch to concept 2 does not re-read the episode-start RAM. Breakout,
+    sudden T = 200 to regenerate-a-hit-block (mode 3, p = 1, per frame), a ball-tracking
+    policy: the blocks hit in concept 1 stay missing until step T, whose four frames write them
+    back to their values at the reset, one per frame; from then on the blocks are the reset's
+    (a block hit is regenerated in its own frame). Re-reading the RAM at the switch would take
+    the missing blocks as the start and never bring them back."""
+    T = 200
+    config = drift("sudden", T, Config(event=RandomEvent(3, 1.0)))
+    env = make("Breakout", config)
+    try:
+        run = run_lockstep([env], T + 10, lambda k, runs: breakout_tracker(last_ram(runs[0])))[0]
+    finally:
+        env.close()
+    assert not run.done.any()
+    np.testing.assert_array_equal(run.stacked("concept"),
+                                  np.repeat((np.arange(T + 10) >= T)[:, None], 2, 1))
+    start, blocks = run.reset_info["ram"][:, :36], run.ram[:, :, :36]  # ram[k + 1]: after step k
+    missing = (blocks != start).sum(-1)
+    assert (missing[T] >= 2).all(), "the tracker should have hit blocks before the switch"
+    fired = run.stacked("event_fired")
+    assert not fired[:T].any()
+    np.testing.assert_array_equal(fired[T], missing[T])
+    np.testing.assert_array_equal(blocks[T + 1:], np.broadcast_to(start, blocks[T + 1:].shape))
