@@ -86,6 +86,16 @@ def run_lockstep(envs, num_steps, policy):
     return runs
 
 
+def lockstep_with_twin(game, config, num_steps, policy, **kw):
+    """(run of ``config``, run of its 3.1 twin), stepped with the same actions."""
+    run_config, twin = make(game, config, **kw), make(game, **kw)
+    try:
+        return tuple(run_lockstep([run_config, twin], num_steps, policy))
+    finally:
+        run_config.close()
+        twin.close()
+
+
 def run_env(env, actions):
     """Reset ``env`` and step it through ``actions`` (T, B)."""
     return run_lockstep([env], len(actions), lambda k, runs: actions[k])[0]

@@ -8,8 +8,8 @@ import numpy as np
 
 from stori_jax import ActionNoise, Config, ConceptDrift, ObservationMask, RandomEvent
 
-from _env_support import (NOOP, breakout_tracker, last_ram, make, random_actions, run_env,
-                          run_lockstep)
+from _env_support import (NOOP, breakout_tracker, last_ram, lockstep_with_twin, make,
+                          random_actions, run_env, run_lockstep)
 
 BREAKOUT_ALL = [(8, 151, 57, 92), (7, 152, 189, 195), (2, 158, 3, 16), (8, 151, 105, 130),
                 (8, 151, 131, 156), (8, 151, 157, 182)]  # Breakout blackout mode 1, black
@@ -32,14 +32,9 @@ def test_sudden_drift_to_blackout_switches_at_step_T_and_restarts_each_episode()
     episode end is the next episode's first (unmasked) one."""
     steps, T = 25, 5
     config = drift("sudden", T, Config(observation=ObservationMask("blackout", 1, 1.0)))
-    kw = dict(obs="raw", max_episode_frames=40)
-    ev_env, twin_env = make("Breakout", config, **kw), make("Breakout", **kw)
     actions = random_actions(4, steps, 2, seed=21)
-    try:
-        ev, twin = run_lockstep([ev_env, twin_env], steps, lambda k, runs: actions[k])
-    finally:
-        ev_env.close()
-        twin_env.close()
+    ev, twin = lockstep_with_twin("Breakout", config, steps, lambda k, runs: actions[k],
+                                  obs="raw", max_episode_frames=40)
     np.testing.assert_array_equal(ev.ram, twin.ram)
     episode_step = np.arange(steps) % 10
     concept = ev.stacked("concept")
@@ -64,12 +59,7 @@ def test_cyclic_drift_to_a_ram_obs_mode_alternates_every_T_steps():
     steps, T = 14, 3
     config = drift("cyclic", T, Config(observation=ObservationMask("ram", 2, 1.0)))
     actions = random_actions(18, steps, 2, seed=22)
-    ev_env, twin_env = make("Boxing", config, obs="raw"), make("Boxing", obs="raw")
-    try:
-        ev, twin = run_lockstep([ev_env, twin_env], steps, lambda k, runs: actions[k])
-    finally:
-        ev_env.close()
-        twin_env.close()
+    ev, twin = lockstep_with_twin("Boxing", config, steps, lambda k, runs: actions[k], obs="raw")
     np.testing.assert_array_equal(ev.ram, twin.ram)
     np.testing.assert_array_equal(ev.stacked("reward"), twin.stacked("reward"))
     expected = (np.arange(steps) // T) % 2

@@ -12,24 +12,14 @@ import pytest
 
 from stori_jax import Config, ConceptDrift, RandomEvent
 
-from _env_support import (NOOP, binomial_ok, breakout_tracker, make, random_actions,
-                          run_env, run_lockstep)
+from _env_support import (NOOP, binomial_ok, breakout_tracker, lockstep_with_twin, make,
+                          random_actions, run_env, run_lockstep)
 
 BLOCKS = slice(0, 36)
 
 
 def event(mode, prob, granularity="frame"):
     return Config(event=RandomEvent(mode, prob), granularity=granularity)
-
-
-def lockstep_with_twin(game, config, num_steps, policy, **kw):
-    """(event run, 3.1 twin run) stepped with the same actions."""
-    ev, twin = make(game, config, **kw), make(game, **kw)
-    try:
-        return run_lockstep([ev, twin], num_steps, policy)
-    finally:
-        ev.close()
-        twin.close()
 
 
 def track_twin(k, runs):
