@@ -81,7 +81,7 @@ def test_reported_executed_actions_are_the_executed_ones():
 
 
 def test_bankheist_replacements_never_fire():
-    """BankHeist draws the replacement from actions 0..9 (no FIRE, no self-bombing)."""
+    """BankHeist draws the replacement from actions 0..9 (NOOP, FIRE, the eight directions)."""
     steps = 60
     env = make("BankHeist", noise(1.0))
     intended = np.random.default_rng(34).integers(10, 18, (steps, 2)).astype(np.int32)

@@ -1,4 +1,7 @@
-"""BankHeist (STORI_SPEC section 8). 18 actions; type 1 replaces actions from 0..9 (no FIRE)."""
+"""BankHeist (STORI_SPEC section 8). 18 actions; type 1 replaces actions from 0..9
+(NOOP, FIRE and the eight directions: the reference's set; it leaves out the eight moves that
+also fire, though FIRE itself, index 1, stays in).
+"""
 
 from __future__ import annotations
 
