@@ -80,7 +80,7 @@ def test_reported_executed_actions_are_the_executed_ones():
     np.testing.assert_array_equal(np.stack(ev_reward), np.stack(twin_reward))
 
 
-def test_bankheist_replacements_never_fire():
+def test_bankheist_replacements_come_from_actions_0_to_9():
     """BankHeist draws the replacement from actions 0..9 (NOOP, FIRE, the eight directions)."""
     steps = 60
     env = make("BankHeist", noise(1.0))
