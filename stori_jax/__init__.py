@@ -21,6 +21,7 @@ _LAZY = {
     "Env": ("stori_jax.env", "Env"),
     "rollout": ("stori_jax.rollout", "rollout"),
     "Trajectory": ("stori_jax.rollout", "Trajectory"),
+    "XlaHandle": ("stori_jax.xla", "XlaHandle"),
     "WorkerError": ("stori_jax.backends.subproc", "WorkerError"),
     "EnvClosedError": ("stori_jax.backends.subproc", "EnvClosedError"),
     "InterruptedStepError": ("stori_jax.backends.subproc", "InterruptedStepError"),

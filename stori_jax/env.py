@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import time
 
 import gymnasium as gym
@@ -201,6 +202,9 @@ class Env:
         self._in_flight = None
         self._needs_reset = True
         self._reset_pending = np.zeros(plan.num_envs, bool)
+        # stepping through env.xla(): which (handle, step) is current, and its steps so far
+        self._xla_epoch, self._xla_steps, self._xla_driven = 0, 0, False
+        self._xla_key = None  # the key after the last step through xla(), for a later reset
 
     # -- lifecycle ------------------------------------------------------------------------------
 
@@ -240,6 +244,7 @@ class Env:
         # until this reset has finished, an interruption (Ctrl-C, a timeout) leaves an env that
         # needs one
         self._needs_reset = True
+        self._leave_xla()
         if self._in_flight is not None or getattr(self.backend, "pending", False):
             # finish a step (or an interrupted reset) still in flight; a step interrupted inside
             # emulation needs nothing more: the reset below starts every emulator afresh
@@ -249,7 +254,7 @@ class Env:
         zeros = jnp.zeros((self.num_envs,), jnp.int32)
         state = self._state._replace(episode_step=zeros, prev_executed=zeros)
         state, draws = before_step(self._jit_plan, state, zeros, resetting=True)
-        self._write_inputs(self.backend.views, draws, reset_first=None)
+        self._write_inputs(draws, reset_first=None)
         self.backend.send_reset()
         out = self._wait(deadline, timeout, late)
         everyone = np.ones(self.num_envs, bool)
@@ -303,6 +308,9 @@ class Env:
         if self._needs_reset:
             raise RuntimeError("call reset() first (before the first step, and after an "
                                "interrupted step or reset)")
+        if self._xla_driven:
+            raise RuntimeError("this env is stepped by the step function of env.xla(): keep "
+                               "using it, or call reset() to step the env from Python again")
         if self._in_flight is not None:
             raise RuntimeError("a step is already in flight: call recv() before send() again")
         a = self.validate_actions(actions)
@@ -310,7 +318,7 @@ class Env:
             state, draws = self._state, self._host_draws(a)
         else:
             state, draws = before_step(self._jit_plan, self._state, a)
-        self._write_inputs(self.backend.views, draws, reset_first=self._reset_pending)
+        self._write_inputs(draws, reset_first=self._reset_pending)
         self.backend.send_step()
         self._in_flight = (state, draws, self._reset_pending.copy())
 
@@ -356,6 +364,75 @@ class Env:
         self.send(actions)
         return self.recv(timeout)
 
+    # -- stepping inside jax.jit ---------------------------------------------------------------
+
+    def xla(self):
+        """``(handle, step)``: stepping inside ``jax.jit``, as envpool's xla handle.
+
+        ``step(handle, actions) -> (handle, (obs, reward, terminated, truncated, info))`` is a
+        jitted pure function that can sit inside the caller's ``jit`` and ``jax.lax.scan``
+        (not ``vmap``: the batch is already the envs).  It gives exactly what :meth:`step`
+        gives.  Each handle steps once: pass on the one the step returns.  Take it from a
+        settled env (after ``reset()``, nothing in flight); from then on the env is stepped
+        only through ``step``, until ``reset()`` (which makes older handles stale).  Errors in
+        the emulators (a dead worker, an action out of range, a stale handle) surface from the
+        compiled call as a ``jax.errors.JaxRuntimeError`` that quotes them."""
+        from stori_jax import xla
+
+        self._check_open()
+        if self._xla_driven:
+            raise RuntimeError("xla() was already called: keep stepping its latest handle, or "
+                               "reset() the env first")
+        if self._in_flight is not None or self._needs_reset:
+            raise RuntimeError("xla() needs a settled env: reset() it, and recv() any step in "
+                               "flight, first")
+        self._xla_epoch += 1
+        self._xla_steps, self._xla_driven = 0, True
+        emulate = functools.partial(self._xla_emulate, self._xla_epoch)
+        return (xla.initial_handle(self._state, self._reset_pending),
+                xla.make_step(self._jit_plan, emulate))
+
+    def _leave_xla(self) -> None:
+        """Handles of env.xla() go stale (reset, restore, or a failed step); the env's key
+        goes on from the last step's, as if the env had been stepped from Python."""
+        self._xla_epoch += 1
+        self._xla_driven = False
+        if self._xla_key is not None:
+            self._state = self._state._replace(key=jnp.asarray(self._xla_key))
+            self._xla_key = None
+
+    def _xla_emulate(self, epoch, steps, key, actions, executed, event_u, event_active,
+                     ram_render, noops, reset_first):
+        """The host callback of env.xla()'s step: run the emulators, return copies of their
+        outputs (the buffers are reused by the next step)."""
+        self._check_open()
+        if epoch != self._xla_epoch or not self._xla_driven:
+            raise RuntimeError("stale xla handle: the env was reset (or restored, or xla() was "
+                               "called again) since; use the handle and step of its latest "
+                               "xla()")
+        if int(steps) != self._xla_steps:
+            raise RuntimeError(f"stale xla handle: it follows {int(steps)} steps, the env has "
+                               f"taken {self._xla_steps}; step the handle the last step returned "
+                               "(a handle steps once, the emulators cannot be rewound)")
+        self.validate_actions(actions)
+        draws = Draws(executed, None, None, event_u, event_active, ram_render, noops, None,
+                      None, None, None)
+        try:
+            self._write_inputs(draws, reset_first=reset_first)
+            self.backend.send_step()
+            out = self.backend.recv()
+            result = WorkerOutputs(**{
+                name: np.array(out[name]) if name != "frames" or self.plan.obs != "ram"
+                else np.zeros((0,), np.uint8) for name in WorkerOutputs._fields})
+        except BaseException:
+            # the emulators may be ahead of the JAX side: only reset() continues
+            self._leave_xla()
+            self._needs_reset = True
+            raise
+        self._xla_steps += 1
+        self._xla_key = np.array(key)
+        return result
+
     # -- snapshots ------------------------------------------------------------------------------
 
     def snapshot(self) -> dict:
@@ -364,9 +441,9 @@ class Env:
         steps (nothing in flight).  Restore it with :meth:`restore` into an env made with the
         same arguments (e.g. after a restart, to resume training)."""
         self._check_open()
-        if self._in_flight is not None or self._needs_reset:
+        if self._in_flight is not None or self._needs_reset or self._xla_driven:
             raise RuntimeError("snapshot() needs a settled env: reset() it, and recv() any step "
-                               "in flight, first")
+                               "in flight, first (an env stepped by env.xla() needs reset())")
         if not hasattr(self.backend, "snapshot"):
             raise ValueError(f"backend {type(self.backend).__name__} cannot snapshot its "
                              "emulators; use backend='subproc'")
@@ -390,6 +467,7 @@ class Env:
             with contextlib.suppress(InterruptedStepError):
                 self.backend.recv()
             self._in_flight = None
+        self._leave_xla()
         self.backend.restore(snapshot["emulators"])
         self._state = EnvState(*jax.tree.map(jnp.asarray, tuple(snapshot["state"])))
         self._reset_pending = np.array(snapshot["reset_pending"], bool)
@@ -414,7 +492,9 @@ class Env:
             executed=np.repeat(actions[:, None], skip, axis=1), executed_slots=slots,
             corrupted=np.zeros(slots.shape, bool))
 
-    def _write_inputs(self, views, draws, reset_first) -> None:
+    def _write_inputs(self, draws, reset_first) -> None:
+        """The workers' inputs of one step (or reset) from its Draws (jax or numpy arrays)."""
+        views = self.backend.views
         host = jax.device_get((draws.executed, draws.event_u, draws.event_active,
                                draws.ram_render, draws.noops))
         (views["executed"][...], views["event_u"][...], views["event_active"][...],

@@ -1,0 +1,99 @@
+"""Stepping inside ``jax.jit``: ``handle, step = env.xla()``, as envpool's xla handle.
+
+``step(handle, actions) -> (handle, (obs, reward, terminated, truncated, info))`` is a pure JAX
+function: the draws before the emulators and the masks and preprocessing after them are the
+same compiled code as :meth:`Env.step`, and the emulators themselves run in one ordered host
+callback (``jax.experimental.io_callback``).  So a whole rollout, policy included, can be one
+``jax.lax.scan`` inside one ``jax.jit``, and it gives the trajectory ``Env.step`` gives, bit for
+bit.
+
+The emulators are not functional: a handle is a ticket for the next step of the env that made
+it, valid once.  Stepping an old handle again (rewinding) is an error, never a silent fork.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.experimental import io_callback
+
+from stori_jax.backends.layout import RAM_SIZE, SCREEN
+from stori_jax.core import EnvState, WorkerOutputs, after_step, before_step, push_frames
+
+
+class XlaHandle(NamedTuple):
+    """The JAX side of an env between two steps (a pytree: pass it through ``jit``/``scan``)."""
+
+    state: EnvState
+    reset_pending: jax.Array  # (B,) bool: reset these envs on the next step (autoreset=False)
+    steps: jax.Array          # () int32: steps taken since env.xla(), checked by the env
+
+
+def frames_shape(layout: str, num_envs: int) -> tuple[int, ...]:
+    """The shape of the screens a backend hands over in ``layout`` (see ``pool_screens``)."""
+    height, width, channels = SCREEN
+    return {"pair": (2, num_envs) + SCREEN, "pooled": (num_envs,) + SCREEN,
+            "pooled_chw": (num_envs, channels, height, width)}[layout]
+
+
+def output_shapes(plan) -> WorkerOutputs:
+    """What one step's callback returns; no screens where the observation is the RAM."""
+    b = plan.num_envs
+    frames = frames_shape(plan.frames_layout, b) if plan.obs != "ram" else (0,)
+    shapes = dict(frames=(frames, np.uint8), ram=((b, RAM_SIZE), np.uint8),
+                  ram_rendered=((b,), np.uint8), reward=((b,), np.float32),
+                  terminated=((b,), np.uint8), truncated=((b,), np.uint8),
+                  lives=((b,), np.int32), event_fired=((b,), np.int32),
+                  episode_return=((b,), np.float32), episode_length=((b,), np.int32))
+    return WorkerOutputs(**{name: jax.ShapeDtypeStruct(shape, dtype)
+                            for name, (shape, dtype) in shapes.items()})
+
+
+def initial_handle(state: EnvState, reset_pending) -> XlaHandle:
+    return XlaHandle(state=state, reset_pending=jnp.asarray(reset_pending, bool),
+                     steps=jnp.zeros((), jnp.int32))
+
+
+def check_traced_actions(actions, num_envs: int, num_actions: int) -> jax.Array:
+    """Shape and dtype are known while tracing: check them there (values on the host)."""
+    shape, dtype = jnp.shape(actions), jnp.result_type(actions)
+    expected = f"shape ({num_envs},) of ints in [0, {num_actions - 1}]"
+    if shape != (num_envs,):
+        raise ValueError(f"actions must have {expected}, got shape {shape}")
+    if not jnp.issubdtype(dtype, jnp.integer):
+        raise ValueError(f"actions must have an integer dtype ({expected}), got {dtype}")
+    return jnp.asarray(actions, jnp.int32)
+
+
+def xla_step(plan, emulate, handle: XlaHandle, actions):
+    """One agent step of every env, traceable: ``emulate`` is the env's host callback."""
+    if not isinstance(handle, XlaHandle):
+        raise ValueError(f"handle must be the XlaHandle from env.xla() or the last step, got "
+                         f"{type(handle).__name__}")
+    actions = check_traced_actions(actions, plan.num_envs, plan.num_actions)
+    state, draws = before_step(plan, handle.state, actions)
+    reset_first = handle.reset_pending
+    out = io_callback(emulate, output_shapes(plan), handle.steps, state.key, actions,
+                      draws.executed, draws.event_u, draws.event_active, draws.ram_render,
+                      draws.noops, reset_first, ordered=True)
+    done = (out.terminated != 0) | (out.truncated != 0)
+    new_episode = reset_first | done if plan.autoreset else reset_first
+    state, obs, reward, terminated, truncated, info = after_step(
+        plan, state, draws, out, new_episode, reset_first)
+    if plan.obs == "atari84":
+        # kept apart from the resize, as Env.step compiles them apart (fused, XLA would
+        # recompute the resize for each stack slot of a new episode)
+        obs = push_frames(state.stack, jax.lax.optimization_barrier(obs), new_episode)
+        state = state._replace(stack=obs)
+    pending = jnp.zeros_like(done) if plan.autoreset else done
+    return (XlaHandle(state, pending, handle.steps + 1),
+            (obs, reward, terminated, truncated, info))
+
+
+def make_step(plan, emulate):
+    """``step(handle, actions)``, jitted (it may also be called inside a caller's jit)."""
+    return jax.jit(functools.partial(xla_step, plan, emulate))

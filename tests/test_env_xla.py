@@ -1,0 +1,158 @@
+"""Stepping inside ``jax.jit`` (``handle, step = env.xla()``): a ``jax.lax.scan`` over the step
+gives exactly what ``Env.step`` gives, handles step once, and every misuse is a clear error."""
+
+from __future__ import annotations
+
+import os
+import signal
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import stori_jax
+from stori_jax import Config
+
+from _env_support import make, random_actions, to_numpy
+
+STALE = "stale xla handle"
+
+
+def scan(step, handle, actions):
+    """Every step of ``actions`` (T, B) inside one compiled call."""
+    return jax.jit(lambda h, a: jax.lax.scan(step, h, a))(handle, jnp.asarray(actions))
+
+
+def python_steps(env, actions):
+    return to_numpy(jax.tree.map(lambda *x: jnp.stack(x), *[env.step(a) for a in actions]))
+
+
+def assert_same(a, b):
+    names = ("obs", "reward", "terminated", "truncated")
+    for name, x, y in zip(names, a[:4], b[:4]):
+        np.testing.assert_array_equal(x, y, err_msg=name)
+    assert a[4].keys() == b[4].keys()
+    for name in a[4]:
+        jax.tree.map(lambda x, y: np.testing.assert_array_equal(x, y, err_msg=name),
+                     a[4][name], b[4][name])
+
+
+# episodes of 20 agent steps (max_episode_frames 80): autoresets inside the scan
+CASES = {
+    "Breakout 2.2 (drift to a blackout), atari84": dict(game="Breakout", preset="2.2",
+                                                        obs="atari84"),
+    "Breakout 2.1 (events), autoreset=False": dict(game="Breakout", preset="2.1", obs="raw",
+                                                   autoreset=False),
+    "Boxing 3.2C (RAM-obs render), raw": dict(game="Boxing", preset="3.2C", obs="raw"),
+    "Gopher 3.2 (per-frame blackout: both screens), raw": dict(game="Gopher", preset="3.2",
+                                                              obs="raw"),
+    "BankHeist 1 (action noise), type 0": dict(game="BankHeist", config=Config(
+        action_noise=stori_jax.ActionNoise(0.3), ram_observation=True), obs="ram"),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_a_scan_over_the_xla_step_is_env_step_bit_for_bit(case):
+    kw = dict(CASES[case])
+    game = kw.pop("game")
+    steps = 45
+    actions = random_actions(stori_jax.get_game(game).num_actions, steps, 2, seed=4)
+    with make(game, max_episode_frames=80, **kw) as env:
+        env.reset()
+        expected = python_steps(env, actions)
+    with make(game, max_episode_frames=80, **kw) as env:
+        env.reset()
+        handle, step = env.xla()
+        handle, got = scan(step, handle, actions)
+        assert int(handle.steps) == steps
+    assert (expected[2] | expected[3]).sum() >= 4, "the run should cross episode ends"
+    assert_same(to_numpy(got), expected)
+
+
+def test_envpool_backend_steps_inside_jit_too():
+    pytest.importorskip("envpool")
+    actions = random_actions(4, 30, 2, seed=5)
+    kw = dict(backend="envpool", autoreset=False, granularity="step", num_workers=None,
+              max_episode_frames=80)
+    with make("Breakout", preset="1", **kw) as env:
+        env.reset()
+        expected = python_steps(env, actions)
+    with make("Breakout", preset="1", **kw) as env:
+        env.reset()
+        handle, step = env.xla()
+        _, got = scan(step, handle, actions)
+    assert_same(to_numpy(got), expected)
+
+
+def test_reset_after_xla_steps_goes_on_as_after_python_steps():
+    """The key stream continues from the last xla step: xla steps, reset, Python steps equal
+    Python steps, reset, Python steps."""
+    actions = random_actions(4, 12, 2, seed=6)
+    with make("Breakout", preset="1") as env:
+        env.reset()
+        python_steps(env, actions[:8])
+        expected = env.reset(), python_steps(env, actions[8:])
+    with make("Breakout", preset="1") as env:
+        env.reset()
+        handle, step = env.xla()
+        scan(step, handle, actions[:8])
+        got = env.reset(), python_steps(env, actions[8:])
+    jax.tree.map(np.testing.assert_array_equal, to_numpy(got[0]), to_numpy(expected[0]))
+    assert_same(got[1], expected[1])
+
+
+def test_a_handle_steps_once():
+    with make("Breakout") as env:
+        env.reset()
+        first, step = env.xla()
+        second, _ = step(first, jnp.zeros(2, jnp.int32))
+        with pytest.raises(jax.errors.JaxRuntimeError, match=f"{STALE}: it follows 0 steps, "
+                                                             "the env has taken 1"):
+            step(first, jnp.zeros(2, jnp.int32))
+        third, _ = step(second, jnp.zeros(2, jnp.int32))  # the latest handle still steps
+        assert int(third.steps) == 2
+        env.reset()  # older handles are stale, as is the step function
+        with pytest.raises(jax.errors.JaxRuntimeError, match="env was reset"):
+            step(third, jnp.zeros(2, jnp.int32))
+        handle, step = env.xla()
+        handle, _ = step(handle, jnp.zeros(2, jnp.int32))
+        assert int(handle.steps) == 1
+
+
+def test_xla_misuse_is_a_clear_error():
+    with make("Breakout") as env:
+        with pytest.raises(RuntimeError, match="settled env: reset"):
+            env.xla()
+        env.reset()
+        handle, step = env.xla()
+        with pytest.raises(RuntimeError, match="already called"):
+            env.xla()
+        with pytest.raises(RuntimeError, match="stepped by the step function of env.xla"):
+            env.step(np.zeros(2, np.int32))
+        with pytest.raises(RuntimeError, match="needs a settled env"):
+            env.snapshot()
+        with pytest.raises(ValueError, match=r"shape \(2,\) of ints in \[0, 3\], got shape \(3,\)"):
+            step(handle, jnp.zeros(3, jnp.int32))
+        with pytest.raises(ValueError, match="integer dtype .* got float32"):
+            step(handle, jnp.zeros(2, jnp.float32))
+        with pytest.raises(ValueError, match="handle must be the XlaHandle"):
+            step((handle.state,), jnp.zeros(2, jnp.int32))
+        # a value out of range is seen on the host, before anything is sent
+        with pytest.raises(jax.errors.JaxRuntimeError, match=r"actions out of range: .* 0\.\.7"):
+            step(handle, jnp.array([0, 7], jnp.int32))
+        handle, _ = step(handle, jnp.array([0, 3], jnp.int32))
+        env.reset()
+        env.step(np.zeros(2, np.int32))  # stepped from Python again
+    with pytest.raises(jax.errors.JaxRuntimeError, match="environment is closed"):
+        step(handle, jnp.zeros(2, jnp.int32))
+
+
+def test_a_worker_dying_under_an_xla_step_is_reported():
+    with make("Breakout", num_envs=2, num_workers=1, inline_envs=0) as env:
+        env.reset()
+        handle, step = env.xla()
+        handle, _ = step(handle, jnp.zeros(2, jnp.int32))
+        os.kill(env.backend.pids[0], signal.SIGKILL)
+        with pytest.raises(jax.errors.JaxRuntimeError, match="worker 0 .*died"):
+            step(handle, jnp.zeros(2, jnp.int32))
