@@ -7,7 +7,10 @@ numpy) and ``gymnasium.make_vec`` (a gymnasium VectorEnv, autoreset mode NEXT_ST
 
 Extra keyword arguments (``obs``, ``frame_skip``, ``granularity``, ``backend``, ``num_workers``,
 ``inline_envs``, ``max_episode_frames``, ``noop_max``) go to :func:`stori_jax.make`; the id fixes
-the game and the preset.
+the game and the preset.  A config of your own (type 0 included) goes through the classes:
+
+    env = StoriGymEnv("Breakout", config=stori_jax.Config(ram_observation=True), obs="ram")
+    envs = StoriVectorEnv(8, "Breakout", config=my_config)
 """
 
 from __future__ import annotations
@@ -43,6 +46,10 @@ class _Owner:
         import stori_jax
 
         registered = make_kwargs.pop("registered_as", None)
+        if registered is not None and "config" in make_kwargs:
+            raise ValueError(f"config: the id {env_id(*registered)} fixes the preset; for a "
+                             "Config of your own use stori_jax.gym_adapter.StoriGymEnv(game, "
+                             "config=...) or StoriVectorEnv(num_envs, game, config=...)")
         if registered is not None and (game, preset) != registered:
             raise ValueError(f"this id is {env_id(*registered)}: it fixes game and preset, got "
                              f"game={game!r} preset={preset!r}; use that preset's own id")
@@ -66,10 +73,16 @@ class _Owner:
             raise ValueError(f"seed must be one int for all envs (env i's emulator seed derives "
                              f"from it and i); per-env seed lists are not supported, got {seed!r}")
         if seed is not None and not (self._fresh and seed == self._seed):
+            new_env = self._make(seed)  # a refused seed leaves the current env as it was
             self._env.close()
-            self._seed = seed
-            self._env = self._make(seed)
+            self._seed, self._env = seed, new_env
         self._fresh = False
+
+    @staticmethod
+    def _check_options(options):
+        if options:  # None or {}: nothing asked
+            raise ValueError(f"reset options are not supported by stori_jax envs (reset() "
+                             f"resets every env; no partial reset_mask), got {options!r}")
 
     def close(self, **kwargs):
         if getattr(self, "_env", None) is not None:
@@ -92,6 +105,7 @@ class StoriGymEnv(_Owner, gym.Env):
         self.action_space = self._env.single_action_space
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        self._check_options(options)
         super().reset(seed=seed)
         self._reseed(seed)
         obs, info = self._env.reset()
@@ -122,6 +136,7 @@ class StoriVectorEnv(_Owner, VectorEnv):
         self.action_space = self._env.action_space
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        self._check_options(options)
         self._reseed(seed)
         obs, info = self._env.reset()
         return np.asarray(obs), _numpy_info(info)

@@ -89,6 +89,8 @@ def test_vector_env_next_step_autoreset():
     (dict(num_envs=4), r"num_envs is set by the gymnasium adapter.*make_vec.*got num_envs=4"),
     (dict(autoreset=True), r"autoreset is set by the gymnasium adapter.*got autoreset=True"),
     (dict(render_mode="rgb_array"), r"render_mode: stori_jax envs do not render"),
+    (dict(config=stori_jax.Config()), r"config: the id .*Breakout-2\.1-v0 fixes the preset.*"
+                                      r"StoriGymEnv\(game, config=\.\.\.\)"),
 ])
 def test_kwargs_that_would_contradict_the_id_are_refused(kwargs, pattern):
     import warnings
@@ -99,3 +101,47 @@ def test_kwargs_that_would_contradict_the_id_are_refused(kwargs, pattern):
             gym.make("stori_jax/Breakout-2.1-v0", **kwargs)
     with pytest.raises(ValueError, match=r"fixes game and preset"):
         gym.make_vec("stori_jax/Breakout-2.1-v0", num_envs=2, game="Boxing")
+
+
+@pytest.mark.parametrize("vector", [False, True])
+def test_a_refused_seed_leaves_the_env_usable(vector):
+    env = (gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2) if vector
+           else gym.make("stori_jax/Breakout-3.1-v0"))
+    try:
+        first, _ = env.reset(seed=1)
+        with pytest.raises(ValueError, match=r"seed must be in \[0, .* got 1099511627776"):
+            env.reset(seed=2 ** 40)  # past gymnasium's own checks, refused by stori_jax.make
+        again, _ = env.reset()  # still the env of seed 1, restarted
+        np.testing.assert_array_equal(again, first)
+        env.step(np.zeros(2, np.int64) if vector else 0)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("vector", [False, True])
+def test_reset_options_are_refused_not_ignored(vector):
+    env = (gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2) if vector
+           else gym.make("stori_jax/Breakout-3.1-v0"))
+    try:
+        env.reset(options={})  # nothing asked
+        with pytest.raises(ValueError, match="reset options are not supported.*reset_mask"):
+            env.reset(options={"reset_mask": np.array([True, False])})
+    finally:
+        env.close()
+
+
+def test_a_config_of_ones_own_through_the_adapter_classes():
+    from stori_jax.gym_adapter import StoriGymEnv, StoriVectorEnv
+
+    env = StoriGymEnv("Breakout", config=stori_jax.Config(ram_observation=True), obs="ram")
+    envs = StoriVectorEnv(2, "Breakout", config=stori_jax.Config(
+        action_noise=stori_jax.ActionNoise(1.0)))
+    try:
+        obs, info = env.reset(seed=0)
+        assert obs.shape == (128,) and "labels" in info
+        envs.reset(seed=0)
+        *_, info = envs.step(np.zeros(2, np.int64))
+        assert info["action_corrupted"].all()
+    finally:
+        env.close()
+        envs.close()
