@@ -149,6 +149,15 @@ def jit_key(plan: Plan) -> Plan:
     return plan
 
 
+def _differences(snapshot_plan, plan: Plan) -> list[str]:
+    """The fields in which two plans differ, as 'name A there, B here'."""
+    if not isinstance(snapshot_plan, Plan):
+        return [f"plan {snapshot_plan!r} there"]
+    return [f"{f.name} {getattr(snapshot_plan, f.name)!r} there, {getattr(plan, f.name)!r} here"
+            for f in dataclasses.fields(Plan)
+            if getattr(snapshot_plan, f.name) != getattr(plan, f.name)]
+
+
 def default_split(num_envs: int, cores: int) -> tuple[int, int]:
     """(worker processes, envs emulated in this process) for a batch on ``cores`` cores."""
     if cores < 2 or num_envs < 2:
@@ -457,9 +466,12 @@ class Env:
         if not isinstance(snapshot, dict) or set(snapshot) != {
                 "plan", "seed", "state", "reset_pending", "emulators"}:
             raise ValueError("snapshot must be a dict returned by Env.snapshot()")
-        if snapshot["plan"] != self.plan:
-            raise ValueError(f"snapshot was taken of a different env:\n  snapshot: "
-                             f"{snapshot['plan']}\n  this env: {self.plan}")
+        differs = _differences(snapshot["plan"], self.plan)
+        if snapshot["seed"] != self.seed:
+            differs.append(f"seed {snapshot['seed']} there, {self.seed} here")
+        if differs:
+            raise ValueError("snapshot was taken of a different env (make this one with the "
+                             "same arguments): " + "; ".join(differs))
         if not hasattr(self.backend, "restore"):
             raise ValueError(f"backend {type(self.backend).__name__} cannot restore emulators; "
                              "use backend='subproc'")

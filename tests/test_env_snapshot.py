@@ -89,10 +89,15 @@ def test_restore_checks_the_env_is_alike():
         snap = env.snapshot()
     with stori_jax.make("Breakout", "1", num_envs=2, seed=0, num_workers=1) as other:
         other.reset()
-        with pytest.raises(ValueError, match="different env"):
+        with pytest.raises(ValueError, match=r"different env .*: noise None there, \S+") as e:
             other.restore(snap)
+        assert ";" not in str(e.value), "only the differing field is named"
         with pytest.raises(ValueError, match="Env.snapshot"):
             other.restore({"plan": None})
+    with stori_jax.make("Breakout", "3.1", num_envs=2, seed=1, num_workers=1) as other:
+        other.reset()
+        with pytest.raises(ValueError, match=r"different env .*: seed 0 there, 1 here$"):
+            other.restore(snap)
 
 
 def test_snapshot_needs_a_settled_env():
