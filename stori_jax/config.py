@@ -181,7 +181,9 @@ class Config:
         if self.drift is not None:
             self._check_secondary(self.drift.secondary)
         if self.game is not None:
-            get_game(self.game).validate(self)
+            spec = get_game(self.game)
+            object.__setattr__(self, "game", spec.name)  # one spelling: 'breakout' is Breakout
+            spec.validate(self)
 
     def _check_secondary(self, secondary: "Config") -> None:
         """Concept 2 lives inside this config: nothing it sets may be ignored or contradict it."""

@@ -248,7 +248,7 @@ def test_secondary_settings_that_would_be_ignored():
     unbound = Config(drift=ConceptDrift("sudden", 5, boxing_secondary))
     with pytest.raises(ValueError, match=r"bound to game 'Boxing' but Config\.game is 'Gopher'"):
         unbound.for_game("Gopher")
-    assert unbound.for_game("boxing").game == "boxing"
+    assert unbound.for_game("boxing").game == "Boxing"  # one spelling of each game
 
 
 # -- type 0, config fields ---------------------------------------------------------------------
@@ -429,3 +429,11 @@ def test_reference_values_checked_by_config():
         Config.from_reference(drift_ref(**{"partial_observation.mode": "12"}), game="Breakout")
     with pytest.raises(ValueError, match=r"unknown game 'Nope'"):
         Config.from_reference(ref("3.1"), game="Nope")
+
+
+def test_a_game_is_named_one_way_however_it_is_spelled():
+    assert Config(game="breakout").game == "Breakout"
+    assert Config(game="BREAKOUT") == Config(game="Breakout")
+    reference = {"stochasticity_type": "1",
+                 "intrinsic_stochasticity": {"action_dependent": {"stochastic_action_prob": 0.3}}}
+    assert Config.from_reference(reference, game="bankheist") == preset("BankHeist", "1")
