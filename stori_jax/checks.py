@@ -3,7 +3,8 @@
 One wording and one exception type (``ValueError``, wrong type or out of range alike) for the
 whole package, so that ``make``, the configs, ``rollout``, the metrics, the PPO config, the CLI
 and the results loader describe bad input the same way.  Each check names the field and the
-allowed values, and returns the value as a plain Python number (numpy scalars are accepted).
+allowed values, and returns the value as a plain Python number (numpy scalars and 0-d numpy or
+JAX arrays are accepted, so a sweep over ``jnp.linspace`` values works).
 """
 from __future__ import annotations
 
@@ -28,10 +29,20 @@ def _shown(value: Any) -> str:
     return text if len(text) <= 60 else f"{text[:40]}... ({len(text)} characters)"
 
 
+def _unwrapped(value: Any) -> Any:
+    """A 0-d numeric array (numpy or JAX) as its Python scalar; anything else unchanged."""
+    dtype = getattr(value, "dtype", None)
+    if getattr(value, "shape", None) == () and getattr(dtype, "kind", "") in "iuf" \
+            and not isinstance(value, numbers.Number):
+        return value.item()
+    return value
+
+
 def check_int(name: str, value: Any, minimum: int | None = None,
               maximum: int | None = None) -> int:
     """``value`` as an int in [minimum, maximum] (either bound may be None); bools refused."""
     bounds = _range_text(minimum, maximum)
+    value = _unwrapped(value)
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise ValueError(f"{name} must be an int{' ' + bounds if bounds else ''}, "
                          f"got {_shown(value)}")
@@ -50,6 +61,7 @@ def check_real(name: str, value: Any, minimum: float | None = None,
         kind, wanted = "a number " + bounds, bounds
     else:
         kind = wanted = f"a finite number{' ' + bounds if bounds else ''}"
+    value = _unwrapped(value)
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise ValueError(f"{name} must be {kind}, got {_shown(value)}")
     try:

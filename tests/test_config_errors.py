@@ -437,3 +437,15 @@ def test_a_game_is_named_one_way_however_it_is_spelled():
     reference = {"stochasticity_type": "1",
                  "intrinsic_stochasticity": {"action_dependent": {"stochastic_action_prob": 0.3}}}
     assert Config.from_reference(reference, game="bankheist") == preset("BankHeist", "1")
+
+
+def test_zero_dimensional_arrays_are_numbers():
+    """A sweep over np/jnp values works: 0-d numeric arrays are their scalar; others refused."""
+    import jax.numpy as jnp
+
+    assert ActionNoise(jnp.float32(0.25)).prob == 0.25
+    assert ActionNoise(np.array(0.5)).prob == 0.5
+    assert ConceptDrift("sudden", jnp.int32(5), Config(event=RandomEvent(1, 0.1))).period == 5
+    for bad in (jnp.array([0.3]), np.array(True), np.array("0.3")):
+        with pytest.raises(ValueError, match="ActionNoise.prob must be a number in"):
+            ActionNoise(bad)
