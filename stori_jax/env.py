@@ -300,6 +300,9 @@ class Env:
             a = np.asarray(actions)
         except Exception as e:  # noqa: BLE001 - anything not array-like
             raise ValueError(f"actions must be an array of {expected}, got {actions!r}") from e
+        if actions is None or a.dtype.kind in "OSUV":  # None, strings, objects: not numbers
+            raise ValueError(f"actions must be an array of {expected}, got "
+                             f"{type(actions).__name__} {actions!r:.60}")
         if a.shape != (self.num_envs,):
             raise ValueError(f"actions must have {expected}, got shape {a.shape}")
         if a.dtype.kind not in "iu" or (isinstance(actions, (list, tuple)) and any(

@@ -72,9 +72,12 @@ def _canonical_game(game: str) -> str:
 def preset(game: str, name: str) -> Config:
     """The Config of paper preset ``name`` of ``game``, e.g. preset("Breakout", "3.2A")."""
     game = _canonical_game(game)
-    key = (game, str(name))
-    if key not in _PRESETS:
+    key = (game, name)
+    if not isinstance(name, str) or key not in _PRESETS:
         names = [n for g, n in _PRESETS if g == game]
+        if not isinstance(name, str):
+            raise ValueError(f"preset must be a name (a string) of {game}: allowed {names}, got "
+                             f"{name!r} ({type(name).__name__})")
         raise ValueError(f"unknown preset {name!r} for {game}: allowed {names}")
     return _PRESETS[key][1].for_game(game)
 
@@ -82,4 +85,4 @@ def preset(game: str, name: str) -> Config:
 def describe_preset(game: str, name: str) -> str:
     """The paper's definition of a preset, in words."""
     preset(game, name)  # validates
-    return _PRESETS[(_canonical_game(game), str(name))][0]
+    return _PRESETS[(_canonical_game(game), name)][0]

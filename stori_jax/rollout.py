@@ -22,6 +22,15 @@ class Trajectory(NamedTuple):
     last_obs: jax.Array     # the observation after the final step
 
 
+def _is_prng_key(key) -> bool:
+    """A typed key (jax.random.key) or legacy uint32 key data of shape (2,)."""
+    if not isinstance(key, jax.Array):
+        return False
+    if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
+        return key.shape == ()
+    return key.shape == (2,) and key.dtype == jnp.uint32
+
+
 def rollout(env, policy_fn: Callable[[Any, jax.Array, jax.Array], jax.Array], params,
             key: jax.Array, num_steps: int, *, obs: jax.Array | None = None) -> Trajectory:
     """Run ``num_steps`` agent steps of ``env`` under ``policy_fn(params, obs, key) -> (B,)``.
@@ -30,10 +39,17 @@ def rollout(env, policy_fn: Callable[[Any, jax.Array, jax.Array], jax.Array], pa
     here; its randomness comes from ``key`` (split once per step), so the same key, params and
     env seed give the same trajectory.
     """
+    from stori_jax.env import Env
+
+    if not isinstance(env, Env):
+        raise ValueError(f"env must be a batched stori_jax.Env (stori_jax.make), got "
+                         f"{type(env).__name__}")
     num_steps = check_int("num_steps", num_steps, 1)
-    if not isinstance(key, jax.Array):
+    if not _is_prng_key(key):
+        shown = (f"an array of shape {key.shape} and dtype {key.dtype}"
+                 if isinstance(key, jax.Array) else repr(key))
         raise ValueError(f"key must be a JAX PRNG key (jax.random.key(seed) or "
-                         f"jax.random.PRNGKey(seed)), got {key!r}")
+                         f"jax.random.PRNGKey(seed)), got {shown}")
     policy = jax.jit(policy_fn)
     if obs is None:
         obs, _ = env.reset()

@@ -114,6 +114,10 @@ def test_unknown_preset_and_game():
         preset("Pong", "1")
     with pytest.raises(ValueError, match=r"unknown preset"):
         describe_preset("Boxing", "3.2")
+    for number in (2.1, 1):  # str(2.1) would be a preset's name: a number is refused
+        with pytest.raises(ValueError, match=r"preset must be a name \(a string\) of Breakout: "
+                                             r"allowed .* got " + str(number)):
+            preset("Breakout", number)
 
 
 # ---------------------------------------------------------------------------------------------

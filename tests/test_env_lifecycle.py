@@ -287,6 +287,13 @@ def test_non_integer_actions(breakout, actions):
         breakout.step(actions)
 
 
+@pytest.mark.parametrize("actions,shown", [(None, "NoneType None"), ("abc", "str 'abc'"),
+                                           ([1, None, 2], r"list \[1, None, 2\]")])
+def test_actions_that_are_no_numbers_are_named(breakout, actions, shown):
+    with pytest.raises(ValueError, match=r"array of shape \(3,\) of ints in \[0, 3\], got " + shown):
+        breakout.step(actions)
+
+
 @pytest.mark.parametrize("actions", [[0, 1, 4], [-1, 0, 0], np.array([0, 0, 255], np.uint8)])
 def test_out_of_range_actions(breakout, actions):
     with pytest.raises(ValueError, match=r"range.*\(3,\).*\[0, 3\]"):

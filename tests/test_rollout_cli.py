@@ -7,6 +7,7 @@ import sys
 import time
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -38,7 +39,7 @@ def test_rollout_stacks_time_major_and_is_deterministic():
         np.testing.assert_array_equal(a, b)
 
 
-def test_rollout_rejects_bad_num_steps():
+def test_rollout_rejects_bad_arguments():
     with stori_jax.make("Breakout", num_envs=1, seed=0, obs="ram") as env:
         with pytest.raises(ValueError, match="num_steps must be >= 1, got 0"):
             stori_jax.rollout(env, random_policy, {"num_actions": 4}, jax.random.PRNGKey(0), 0)
@@ -46,6 +47,13 @@ def test_rollout_rejects_bad_num_steps():
             stori_jax.rollout(env, random_policy, {"num_actions": 4}, jax.random.PRNGKey(0), True)
         with pytest.raises(ValueError, match=r"key must be a JAX PRNG key .*got 0"):
             stori_jax.rollout(env, random_policy, {"num_actions": 4}, 0, 2)
+        for bad, shown in ((jnp.zeros(3, jnp.uint32), r"shape \(3,\) and dtype uint32"),
+                           (jax.random.split(jax.random.key(0)), r"shape \(2,\) and dtype key")):
+            with pytest.raises(ValueError, match=r"key must be a JAX PRNG key .*got an array of "
+                                                 + shown):
+                stori_jax.rollout(env, random_policy, {"num_actions": 4}, bad, 2)
+        assert stori_jax.rollout(env, random_policy, {"num_actions": 4}, jax.random.key(0),
+                                 1).action.shape == (1, 1)  # typed keys too
         traj = stori_jax.rollout(env, random_policy, {"num_actions": 4}, jax.random.PRNGKey(0),
                                  np.int64(2))
         assert traj.action.shape == (2, 1)
@@ -59,6 +67,16 @@ def test_rollout_rejects_bad_num_steps():
         more = stori_jax.rollout(env, random_policy, {"num_actions": 4}, jax.random.PRNGKey(1),
                                  1, obs=traj.last_obs)  # continuing a run
         assert more.obs.shape == (1, 1, 128)
+
+    from stori_jax.gym_adapter import StoriGymEnv
+
+    single = StoriGymEnv("Breakout")  # one numpy env: its (84, 84, 4) obs is no batch
+    try:
+        with pytest.raises(ValueError, match=r"env must be a batched stori_jax.Env .*got "
+                                             r"StoriGymEnv"):
+            stori_jax.rollout(single, random_policy, {"num_actions": 4}, jax.random.PRNGKey(0), 2)
+    finally:
+        single.close()
 
 
 def test_cli_list_prints_presets_and_modes(capsys):
