@@ -427,8 +427,9 @@ class Env:
                                f"taken {self._xla_steps}; step the handle the last step returned "
                                "(a handle steps once, the emulators cannot be rewound)")
         self.validate_actions(actions)
-        draws = Draws(executed, None, None, event_u, event_active, ram_render, noops, None,
-                      None, None, None)
+        draws = Draws(executed=executed, event_u=event_u, event_active=event_active,
+                      ram_render=ram_render, noops=noops, executed_slots=None, corrupted=None,
+                      concept=None, mask_apply=None, mask_centres=None, step_active=None)
         try:
             self._write_inputs(draws, reset_first=reset_first)
             self.backend.send_step()
@@ -464,14 +465,13 @@ class Env:
                     emulators=self.backend.snapshot())
 
     def restore(self, snapshot: dict) -> None:
-        """Continue from ``snapshot`` (taken by :meth:`snapshot` of an env made alike)."""
+        """Continue from ``snapshot`` (taken by :meth:`snapshot` of an env made alike; its seed
+        may differ: the emulators and the key come from the snapshot, and so does ``seed``)."""
         self._check_open()
         if not isinstance(snapshot, dict) or set(snapshot) != {
                 "plan", "seed", "state", "reset_pending", "emulators"}:
             raise ValueError("snapshot must be a dict returned by Env.snapshot()")
         differs = _differences(snapshot["plan"], self.plan)
-        if snapshot["seed"] != self.seed:
-            differs.append(f"seed {snapshot['seed']} there, {self.seed} here")
         if differs:
             raise ValueError("snapshot was taken of a different env (make this one with the "
                              "same arguments): " + "; ".join(differs))
@@ -485,6 +485,7 @@ class Env:
         self._leave_xla()
         self.backend.restore(snapshot["emulators"])
         self._state = EnvState(*jax.tree.map(jnp.asarray, tuple(snapshot["state"])))
+        self.seed = snapshot["seed"]  # emulators and key are that seed's run now
         self._reset_pending = np.array(snapshot["reset_pending"], bool)
         self._needs_reset = False
 
