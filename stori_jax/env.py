@@ -413,10 +413,20 @@ class Env:
             self._state = self._state._replace(key=jnp.asarray(self._xla_key))
             self._xla_key = None
 
-    def _xla_emulate(self, epoch, steps, key, actions, executed, event_u, event_active,
-                     ram_render, noops, reset_first):
-        """The host callback of env.xla()'s step: run the emulators, return copies of their
-        outputs (the buffers are reused by the next step)."""
+    def _xla_emulate(self, *args):
+        """The host callback of env.xla()'s step (its errors marked: the JaxRuntimeError that
+        carries them is the report)."""
+        from stori_jax.xla import marked
+
+        try:
+            return self._xla_emulate_step(*args)
+        except BaseException as error:
+            raise marked(error)
+
+    def _xla_emulate_step(self, epoch, steps, key, actions, executed, event_u, event_active,
+                          ram_render, noops, reset_first):
+        """Run the emulators for one step of env.xla(); return copies of their outputs (the
+        buffers are reused by the next step)."""
         self._check_open()
         if epoch != self._xla_epoch or not self._xla_driven:
             raise RuntimeError("stale xla handle: the env was reset (or restored, or xla() was "

@@ -14,6 +14,7 @@ it, valid once.  Stepping an old handle again (rewinding) is an error, never a s
 from __future__ import annotations
 
 import functools
+import logging
 from typing import NamedTuple
 
 import jax
@@ -96,4 +97,29 @@ def xla_step(plan, emulate, handle: XlaHandle, actions):
 
 def make_step(plan, emulate):
     """``step(handle, actions)``, jitted (it may also be called inside a caller's jit)."""
+    _quiet_callback_log()
     return jax.jit(functools.partial(xla_step, plan, emulate))
+
+
+# An error raised in the emulators' callback reaches the caller as a JaxRuntimeError whose
+# message already holds the traceback; JAX also logs it.  Those log records are dropped for the
+# errors our callback raises (and marks), so that a stale handle is one message, not three.
+CALLBACK_LOGGER = "jax._src.callback"
+MARK = "stori_jax_xla_step"
+
+
+class _DropOurCallbackErrors(logging.Filter):
+    def filter(self, record: logging.LogRecord) -> bool:
+        error = record.exc_info[1] if record.exc_info else None
+        return not getattr(error, MARK, False)
+
+
+@functools.cache
+def _quiet_callback_log() -> None:
+    logging.getLogger(CALLBACK_LOGGER).addFilter(_DropOurCallbackErrors())
+
+
+def marked(error: BaseException) -> BaseException:
+    """``error`` marked as raised by the emulators' callback (see above)."""
+    setattr(error, MARK, True)
+    return error
