@@ -205,6 +205,24 @@ def after_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, ne
     return (new_state, obs, out.reward + 0, out.terminated != 0, out.truncated != 0, info)
 
 
+def finish_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, reset_first):
+    """The end of a step, shared by ``Env`` (numpy outputs of the workers) and the traced
+    step of ``env.xla()``: (new state, (obs, reward, terminated, truncated, info), the envs
+    due for a reset on the next step).  ``reset_first`` (B,) bool marks envs that were reset
+    instead of stepped (next-step autoreset, or a reset of all)."""
+    done = (out.terminated != 0) | (out.truncated != 0)
+    new_episode = reset_first | done if plan.autoreset else reset_first
+    state, obs, reward, terminated, truncated, info = after_step(
+        plan, state, draws, out, new_episode, reset_first)
+    if plan.obs == "atari84":
+        if isinstance(obs, jax.core.Tracer):  # traced with its caller: keep the two apart
+            obs = jax.lax.optimization_barrier(obs)
+        obs = push_frames(state.stack, obs, new_episode)
+        state = state._replace(stack=obs)
+    pending = done if not plan.autoreset else done & False
+    return state, (obs, reward, terminated, truncated, info), pending
+
+
 @jax.jit
 def push_frames(stack, frame, new_episode):
     """The atari84 frame stack.  Compiled on its own: fused with the resize above, XLA would

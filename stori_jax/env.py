@@ -17,8 +17,8 @@ from stori_jax.backends.subproc import (EnvClosedError, InterruptedStepError, Su
                                         WorkersLate)
 from stori_jax.checks import check_int, check_real
 from stori_jax.config import Config, GRANULARITIES
-from stori_jax.core import (Draws, EnvState, WorkerOutputs, after_step, before_step,
-                            initial_state, push_frames)
+from stori_jax.core import (Draws, EnvState, WorkerOutputs, before_step, finish_step,
+                            initial_state)
 from stori_jax.functional.preprocess import ATARI84, DREAMER64, STACK
 from stori_jax.games import get_game
 from stori_jax.plan import OBS_KINDS, Plan, compile_plan
@@ -211,13 +211,16 @@ class Env:
         self._in_flight = None
         self._needs_reset = True
         self._reset_pending = np.zeros(plan.num_envs, bool)
-        # stepping through env.xla(): which (handle, step) is current, and its steps so far
+        # stepping through env.xla(): the current chain of handles and its steps so far
         self._xla_epoch, self._xla_steps, self._xla_driven = 0, 0, False
-        self._xla_key = None  # the key after the last step through xla(), for a later reset
+        self._xla_key = None   # the key after the last step through xla(), for a later reset
+        self._xla_step = None  # the jitted step, made once per env
 
     # -- lifecycle ------------------------------------------------------------------------------
 
     def close(self) -> None:
+        if self._xla_driven and not self.closed:
+            jax.effects_barrier()  # xla steps still queued finish first
         self.backend.close()
 
     @property
@@ -253,7 +256,7 @@ class Env:
         # until this reset has finished, an interruption (Ctrl-C, a timeout) leaves an env that
         # needs one
         self._needs_reset = True
-        self._leave_xla()
+        self._settle_xla()
         if self._in_flight is not None or getattr(self.backend, "pending", False):
             # finish a step (or an interrupted reset) still in flight; a step interrupted inside
             # emulation needs nothing more: the reset below starts every emulator afresh
@@ -267,7 +270,7 @@ class Env:
         self.backend.send_reset()
         out = self._wait(deadline, timeout, late)
         everyone = np.ones(self.num_envs, bool)
-        obs, _, _, _, info = self._finish(state, draws, out, everyone, everyone)
+        (obs, _, _, _, info), _ = self._finish(state, draws, out, everyone)
         self._needs_reset = False
         self._reset_pending[:] = False
         return obs, info
@@ -353,9 +356,7 @@ class Env:
         try:
             out = self._wait(deadline, timeout, "it is still in flight: call recv() again to "
                                                 "keep waiting, or close() the env")
-            done = (out["terminated"] | out["truncated"]).astype(bool)
-            new_episode = was_reset | (done if self.plan.autoreset else False)
-            result = self._finish(state, draws, out, new_episode, was_reset)
+            result, pending = self._finish(state, draws, out, was_reset)
         except BaseException:
             # interrupted (Ctrl-C) or timed out while waiting: the step stays in flight and the
             # next recv() resumes it.  Interrupted inside this process's emulation
@@ -365,7 +366,7 @@ class Env:
                 self._in_flight, self._needs_reset = None, True
             raise
         self._in_flight = None
-        self._reset_pending = np.zeros(self.num_envs, bool) if self.plan.autoreset else done
+        self._reset_pending = pending
         return result
 
     def step(self, actions, timeout: float | None = None):
@@ -386,9 +387,12 @@ class Env:
         (not ``vmap``: the batch is already the envs).  It gives exactly what :meth:`step`
         gives.  Each handle steps once: pass on the one the step returns.  Take it from a
         settled env (after ``reset()``, nothing in flight); from then on the env is stepped
-        only through ``step``, until ``reset()`` (which makes older handles stale).  Errors in
-        the emulators (a dead worker, an action out of range, a stale handle) surface from the
-        compiled call as a ``jax.errors.JaxRuntimeError`` that quotes them."""
+        only through ``step``, until ``reset()``, which makes every handle stale (call
+        ``xla()`` again for a new one; ``step`` is the same function, so nothing recompiles).
+        Errors in the emulators (a dead worker, an action out of range, a stale handle or one
+        of another env) surface as a ``jax.errors.JaxRuntimeError`` whose last line is the
+        error; on an accelerator, when the step's results are read.  After an error inside a
+        scan, no handle is current: ``reset()``."""
         from stori_jax import xla
 
         self._check_open()
@@ -398,16 +402,19 @@ class Env:
         if self._in_flight is not None or self._needs_reset:
             raise RuntimeError("xla() needs a settled env: reset() it, and recv() any step in "
                                "flight, first")
-        self._xla_epoch += 1
+        self._xla_epoch = xla.new_epoch()
         self._xla_steps, self._xla_driven = 0, True
-        emulate = functools.partial(self._xla_emulate, self._xla_epoch)
-        return (xla.initial_handle(self._state, self._reset_pending),
-                xla.make_step(self._jit_plan, emulate))
+        if self._xla_step is None:
+            self._xla_step = xla.make_step(self._jit_plan, self._xla_emulate)
+        return (xla.initial_handle(self._state, self._reset_pending, self._xla_epoch),
+                self._xla_step)
 
-    def _leave_xla(self) -> None:
-        """Handles of env.xla() go stale (reset, restore, or a failed step); the env's key
-        goes on from the last step's, as if the env had been stepped from Python."""
-        self._xla_epoch += 1
+    def _settle_xla(self) -> None:
+        """Stop stepping through xla(): wait for xla steps still queued (asynchronous dispatch),
+        make every handle stale, and go on with the key where the last xla step left it, as if
+        the env had been stepped from Python."""
+        if self._xla_step is not None:
+            jax.effects_barrier()
         self._xla_driven = False
         if self._xla_key is not None:
             self._state = self._state._replace(key=jnp.asarray(self._xla_key))
@@ -426,16 +433,17 @@ class Env:
     def _xla_emulate_step(self, epoch, steps, key, actions, executed, event_u, event_active,
                           ram_render, noops, reset_first):
         """Run the emulators for one step of env.xla(); return copies of their outputs (the
-        buffers are reused by the next step)."""
+        buffers are reused by the next step).  No JAX in here: this runs inside a callback."""
         self._check_open()
-        if epoch != self._xla_epoch or not self._xla_driven:
-            raise RuntimeError("stale xla handle: the env was reset (or restored, or xla() was "
-                               "called again) since; use the handle and step of its latest "
-                               "xla()")
+        if int(epoch) != self._xla_epoch or not self._xla_driven:
+            raise RuntimeError("stale xla handle: it comes from an earlier xla() of this env "
+                               "(before a reset or restore) or from another env; step the "
+                               "latest handle of this env's xla(), or reset() and call xla()")
         if int(steps) != self._xla_steps:
             raise RuntimeError(f"stale xla handle: it follows {int(steps)} steps, the env has "
                                f"taken {self._xla_steps}; step the handle the last step returned "
-                               "(a handle steps once, the emulators cannot be rewound)")
+                               "(a handle steps once: the emulators cannot be rewound), or "
+                               "reset()")
         self.validate_actions(actions)
         draws = Draws(executed=executed, event_u=event_u, event_active=event_active,
                       ram_render=ram_render, noops=noops, executed_slots=None, corrupted=None,
@@ -449,8 +457,7 @@ class Env:
                 else np.zeros((0,), np.uint8) for name in WorkerOutputs._fields})
         except BaseException:
             # the emulators may be ahead of the JAX side: only reset() continues
-            self._leave_xla()
-            self._needs_reset = True
+            self._xla_driven, self._needs_reset = False, True
             raise
         self._xla_steps += 1
         self._xla_key = np.array(key)
@@ -488,11 +495,12 @@ class Env:
         if not hasattr(self.backend, "restore"):
             raise ValueError(f"backend {type(self.backend).__name__} cannot restore emulators; "
                              "use backend='subproc'")
+        self._needs_reset = True  # until the emulators and the state are both restored
+        self._settle_xla()
         if self._in_flight is not None or getattr(self.backend, "pending", False):
             with contextlib.suppress(InterruptedStepError):
                 self.backend.recv()
             self._in_flight = None
-        self._leave_xla()
         self.backend.restore(snapshot["emulators"])
         self._state = EnvState(*jax.tree.map(jnp.asarray, tuple(snapshot["state"])))
         self.seed = snapshot["seed"]  # emulators and key are that seed's run now
@@ -527,17 +535,15 @@ class Env:
          views["ram_render"][...], views["noops"][...]) = host
         views["reset_first"][...] = 0 if reset_first is None else reset_first
 
-    def _finish(self, state, draws, out, new_episode, reset_step):
+    def _finish(self, state, draws, out, reset_first):
+        """((obs, reward, terminated, truncated, info), envs due for a reset) of the workers'
+        outputs ``out``; the env's state moves on."""
         outputs = WorkerOutputs(**{name: out[name] for name in WorkerOutputs._fields})
-        state, obs, reward, terminated, truncated, info = after_step(
-            self._jit_plan, state, draws, outputs, new_episode, reset_step)
-        if self.plan.obs == "atari84":
-            obs = push_frames(state.stack, obs, new_episode)
-            state = state._replace(stack=obs)
+        state, result, pending = finish_step(self._jit_plan, state, draws, outputs, reset_first)
         # the workers overwrite their buffers on the next send: finish reading them now
-        jax.block_until_ready((obs, reward, info))
+        jax.block_until_ready(result)
         self._state = state
-        return obs, reward, terminated, truncated, info
+        return result, pending
 
     def __repr__(self):
         return (f"Env({self.plan.game}, {self.config.describe()}, num_envs={self.num_envs}, "

@@ -14,6 +14,7 @@ it, valid once.  Stepping an old handle again (rewinding) is an error, never a s
 from __future__ import annotations
 
 import functools
+import itertools
 import logging
 from typing import NamedTuple
 
@@ -23,7 +24,8 @@ import numpy as np
 from jax.experimental import io_callback
 
 from stori_jax.backends.layout import RAM_SIZE, SCREEN
-from stori_jax.core import EnvState, WorkerOutputs, after_step, before_step, push_frames
+from stori_jax.core import EnvState, WorkerOutputs, before_step, finish_step
+from stori_jax.functional.preprocess import frames_shape
 
 
 class XlaHandle(NamedTuple):
@@ -32,19 +34,21 @@ class XlaHandle(NamedTuple):
     state: EnvState
     reset_pending: jax.Array  # (B,) bool: reset these envs on the next step (autoreset=False)
     steps: jax.Array          # () int32: steps taken since env.xla(), checked by the env
+    epoch: jax.Array          # () int32: which xla() call (of which env) began this chain
 
 
-def frames_shape(layout: str, num_envs: int) -> tuple[int, ...]:
-    """The shape of the screens a backend hands over in ``layout`` (see ``pool_screens``)."""
-    height, width, channels = SCREEN
-    return {"pair": (2, num_envs) + SCREEN, "pooled": (num_envs,) + SCREEN,
-            "pooled_chw": (num_envs, channels, height, width)}[layout]
+_EPOCHS = itertools.count(1)
+
+
+def new_epoch() -> int:
+    """A number no other xla() call of any env in this process has had."""
+    return next(_EPOCHS)
 
 
 def output_shapes(plan) -> WorkerOutputs:
     """What one step's callback returns; no screens where the observation is the RAM."""
     b = plan.num_envs
-    frames = frames_shape(plan.frames_layout, b) if plan.obs != "ram" else (0,)
+    frames = frames_shape(plan.frames_layout, b, SCREEN) if plan.obs != "ram" else (0,)
     shapes = dict(frames=(frames, np.uint8), ram=((b, RAM_SIZE), np.uint8),
                   ram_rendered=((b,), np.uint8), reward=((b,), np.float32),
                   terminated=((b,), np.uint8), truncated=((b,), np.uint8),
@@ -54,9 +58,9 @@ def output_shapes(plan) -> WorkerOutputs:
                             for name, (shape, dtype) in shapes.items()})
 
 
-def initial_handle(state: EnvState, reset_pending) -> XlaHandle:
+def initial_handle(state: EnvState, reset_pending, epoch: int) -> XlaHandle:
     return XlaHandle(state=state, reset_pending=jnp.asarray(reset_pending, bool),
-                     steps=jnp.zeros((), jnp.int32))
+                     steps=jnp.zeros((), jnp.int32), epoch=jnp.asarray(epoch, jnp.int32))
 
 
 def check_traced_actions(actions, num_envs: int, num_actions: int) -> jax.Array:
@@ -77,22 +81,11 @@ def xla_step(plan, emulate, handle: XlaHandle, actions):
                          f"{type(handle).__name__}")
     actions = check_traced_actions(actions, plan.num_envs, plan.num_actions)
     state, draws = before_step(plan, handle.state, actions)
-    reset_first = handle.reset_pending
-    out = io_callback(emulate, output_shapes(plan), handle.steps, state.key, actions,
-                      draws.executed, draws.event_u, draws.event_active, draws.ram_render,
-                      draws.noops, reset_first, ordered=True)
-    done = (out.terminated != 0) | (out.truncated != 0)
-    new_episode = reset_first | done if plan.autoreset else reset_first
-    state, obs, reward, terminated, truncated, info = after_step(
-        plan, state, draws, out, new_episode, reset_first)
-    if plan.obs == "atari84":
-        # kept apart from the resize, as Env.step compiles them apart (fused, XLA would
-        # recompute the resize for each stack slot of a new episode)
-        obs = push_frames(state.stack, jax.lax.optimization_barrier(obs), new_episode)
-        state = state._replace(stack=obs)
-    pending = jnp.zeros_like(done) if plan.autoreset else done
-    return (XlaHandle(state, pending, handle.steps + 1),
-            (obs, reward, terminated, truncated, info))
+    out = io_callback(emulate, output_shapes(plan), handle.epoch, handle.steps, state.key,
+                      actions, draws.executed, draws.event_u, draws.event_active,
+                      draws.ram_render, draws.noops, handle.reset_pending, ordered=True)
+    state, result, pending = finish_step(plan, state, draws, out, handle.reset_pending)
+    return XlaHandle(state, pending, handle.steps + 1, handle.epoch), result
 
 
 def make_step(plan, emulate):

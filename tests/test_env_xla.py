@@ -114,12 +114,25 @@ def test_a_handle_steps_once(caplog):
         assert not [r for r in caplog.records if "io_callback failed" in r.getMessage()]
         third, _ = step(second, jnp.zeros(2, jnp.int32))  # the latest handle still steps
         assert int(third.steps) == 2
-        env.reset()  # older handles are stale, as is the step function
-        with pytest.raises(jax.errors.JaxRuntimeError, match="env was reset"):
+        env.reset()  # every handle is stale
+        earlier = f"{STALE}: it comes from an earlier xla"
+        with pytest.raises(jax.errors.JaxRuntimeError, match=earlier):
             step(third, jnp.zeros(2, jnp.int32))
-        handle, step = env.xla()
+        handle, same_step = env.xla()
+        assert same_step is step  # one compiled step per env: a reset recompiles nothing
+        with pytest.raises(jax.errors.JaxRuntimeError, match=earlier):
+            step(first, jnp.zeros(2, jnp.int32))  # at 0 steps, as the new chain is
         handle, _ = step(handle, jnp.zeros(2, jnp.int32))
         assert int(handle.steps) == 1
+        with make("Breakout") as other:  # a handle of another env, however alike
+            other.reset()
+            other_handle, other_step = other.xla()
+            with pytest.raises(jax.errors.JaxRuntimeError, match="or from another env"):
+                step(other_handle, jnp.zeros(2, jnp.int32))
+            with pytest.raises(jax.errors.JaxRuntimeError, match="or from another env"):
+                other_step(handle, jnp.zeros(2, jnp.int32))
+            other_step(other_handle, jnp.zeros(2, jnp.int32))  # both still step their own
+        step(handle, jnp.zeros(2, jnp.int32))
 
 
 def test_xla_misuse_is_a_clear_error():
@@ -158,3 +171,18 @@ def test_a_worker_dying_under_an_xla_step_is_reported():
         os.kill(env.backend.pids[0], signal.SIGKILL)
         with pytest.raises(jax.errors.JaxRuntimeError, match="worker 0 .*died"):
             step(handle, jnp.zeros(2, jnp.int32))
+
+
+def test_a_failed_restore_of_an_xla_driven_env_needs_a_reset():
+    with make("Breakout", num_envs=2, num_workers=1, inline_envs=0) as env:
+        env.reset()
+        snap = env.snapshot()
+        handle, step = env.xla()
+        step(handle, jnp.zeros(2, jnp.int32))
+        broken = dict(snap, emulators=snap["emulators"][:1])  # one emulator missing
+        with pytest.raises(Exception):
+            env.restore(broken)
+        with pytest.raises(RuntimeError, match="reset"):
+            env.step(np.zeros(2, np.int32))
+        env.restore(snap)  # a good restore (or a reset) continues
+        env.step(np.zeros(2, np.int32))

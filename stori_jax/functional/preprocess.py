@@ -74,6 +74,17 @@ def area_resize(image, height: int, width: int, *, y_axis: int, x_axis: int):
     return ((x + denominator // 2) // denominator).astype(jnp.uint8)
 
 
+def frames_shape(layout: str, num_envs: int, screen: tuple[int, int, int]) -> tuple[int, ...]:
+    """The shape of the screens a backend hands over in ``layout`` (see :func:`pool_screens`)."""
+    height, width, channels = screen
+    shapes = {"pair": (2, num_envs, height, width, channels),
+              "pooled": (num_envs, height, width, channels),
+              "pooled_chw": (num_envs, channels, height, width)}
+    if layout not in shapes:
+        raise ValueError(f"frames layout must be one of {list(FRAMES_LAYOUTS)}, got {layout!r}")
+    return shapes[layout]
+
+
 def pool_screens(frames, layout: str = "pair"):
     """The observed screen (B, 210, 160, 3) from a backend's frames: ``pair`` (2, B, H, W, 3)
     (slot-major, as the workers write them) is max-pooled here, ``pooled`` (B, H, W, 3) was
