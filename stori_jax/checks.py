@@ -32,9 +32,12 @@ def _shown(value: Any) -> str:
 def _unwrapped(value: Any) -> Any:
     """A 0-d numeric array (numpy or JAX) as its Python scalar; anything else unchanged."""
     dtype = getattr(value, "dtype", None)
-    if getattr(value, "shape", None) == () and getattr(dtype, "kind", "") in "iuf" \
+    if getattr(value, "shape", None) == () and getattr(dtype, "kind", None) in ("i", "u", "f") \
             and not isinstance(value, numbers.Number):
-        return value.item()
+        try:
+            return value.item()
+        except Exception:  # noqa: BLE001 - a traced value has no number yet: refused below
+            return value
     return value
 
 

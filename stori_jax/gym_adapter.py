@@ -73,9 +73,12 @@ class _Owner:
             raise ValueError(f"seed must be one int for all envs (env i's emulator seed derives "
                              f"from it and i); per-env seed lists are not supported, got {seed!r}")
         if seed is not None and not (self._fresh and seed == self._seed):
-            new_env = self._make(seed)  # a refused seed leaves the current env as it was
+            from stori_jax.checks import check_int
+            from stori_jax.env import MAX_SEED
+
+            check_int("seed", seed, 0, MAX_SEED)  # a refused seed leaves the env as it was
             self._env.close()
-            self._seed, self._env = seed, new_env
+            self._seed, self._env = seed, self._make(seed)
         self._fresh = False
 
     @staticmethod
@@ -106,8 +109,8 @@ class StoriGymEnv(_Owner, gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         self._check_options(options)
+        self._reseed(seed)  # checks the seed before gymnasium's np_random takes it
         super().reset(seed=seed)
-        self._reseed(seed)
         obs, info = self._env.reset()
         return np.asarray(obs[0]), _first_env_info(info)
 

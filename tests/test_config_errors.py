@@ -441,6 +441,7 @@ def test_a_game_is_named_one_way_however_it_is_spelled():
 
 def test_zero_dimensional_arrays_are_numbers():
     """A sweep over np/jnp values works: 0-d numeric arrays are their scalar; others refused."""
+    import jax
     import jax.numpy as jnp
 
     assert ActionNoise(jnp.float32(0.25)).prob == 0.25
@@ -449,3 +450,7 @@ def test_zero_dimensional_arrays_are_numbers():
     for bad in (jnp.array([0.3]), np.array(True), np.array("0.3")):
         with pytest.raises(ValueError, match="ActionNoise.prob must be a number in"):
             ActionNoise(bad)
+    with pytest.raises(ValueError, match="ActionNoise.prob must be a number in"):
+        ActionNoise(jax.random.key(0))  # a typed key is 0-d too, and no number
+    with pytest.raises(ValueError, match="ActionNoise.prob must be a number in"):
+        jax.jit(lambda p: ActionNoise(p).prob)(0.3)  # traced: no number yet

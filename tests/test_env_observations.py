@@ -161,8 +161,11 @@ SPEC_RAM_WRITES = {
     ("BankHeist", 5): _slots_equal(253),                                   # hide banks
     ("BankHeist", 6): _slots_equal(254),                                   # hide police
 }
-# (env seed, action seed, frames): the conditional modes run until their condition has been
-# met on many frames (a seed first falls at frame 5168, a police car first shows at 1781)
+# the modes that write only when their condition is met (the rest always write)
+CONDITIONAL_WRITES = {("Gopher", 5), ("BankHeist", 5), ("BankHeist", 6)}
+# (env seed, action seed, frames): runs long enough that the condition is met on many frames and
+# unmet on many (a seed first falls at frame 5168, a police car first shows at 1781); BankHeist's
+# banks are shown on every frame of the default 80, so only hide-banks' met side is exercised
 RAM_WRITES_RUN = {("Gopher", 5): (2, 2, 5400), ("BankHeist", 6): (5, 3, 2000)}
 
 
@@ -212,8 +215,10 @@ def test_ram_obs_mode_shows_the_next_noop_frame_of_the_written_ram(game, mode):
             check(obs, info, f"step {t}")
     finally:
         env.close()
+    if (game, mode) in CONDITIONAL_WRITES:
+        assert sum(met) >= 50, "the condition should be met often"
     if (game, mode) in RAM_WRITES_RUN:
-        assert 50 <= sum(met) <= len(met) - 50, "the condition should be met and unmet often"
+        assert len(met) - sum(met) >= 50, "the condition should be unmet often too"
 
 
 def test_ram_obs_mode_renders_the_first_observation_after_an_autoreset():

@@ -105,16 +105,26 @@ def test_kwargs_that_would_contradict_the_id_are_refused(kwargs, pattern):
 
 @pytest.mark.parametrize("vector", [False, True])
 def test_a_refused_seed_leaves_the_env_usable(vector):
-    env = (gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2) if vector
-           else gym.make("stori_jax/Breakout-3.1-v0"))
+    """With random no-ops at every reset (noop_max) the seed shows in the RAM: after a refused
+    seed the env goes on as the env of seed 1 does."""
+    def made():
+        return (gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, noop_max=30) if vector
+                else gym.make("stori_jax/Breakout-3.1-v0", noop_max=30))
+
+    reference, env = made(), made()
     try:
-        first, _ = env.reset(seed=1)
+        reference.reset(seed=1)
+        expected = reference.reset()[1]["ram"]
+        other_seed = reference.reset(seed=2)[1]["ram"]
+        assert not np.array_equal(expected, other_seed), "seeds should show in the RAM"
+        env.reset(seed=1)
         with pytest.raises(ValueError, match=r"seed must be in \[0, .* got 1099511627776"):
-            env.reset(seed=2 ** 40)  # past gymnasium's own checks, refused by stori_jax.make
-        again, _ = env.reset()  # still the env of seed 1, restarted
-        np.testing.assert_array_equal(again, first)
+            env.reset(seed=2 ** 40)  # past gymnasium's own checks, refused by stori_jax
+        again = env.reset()[1]["ram"]  # still the env of seed 1, as if nothing had been asked
+        np.testing.assert_array_equal(again, expected)
         env.step(np.zeros(2, np.int64) if vector else 0)
     finally:
+        reference.close()
         env.close()
 
 
