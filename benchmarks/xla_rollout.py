@@ -36,14 +36,17 @@ def measure(game: str, preset: str, num_envs: int, steps: int, repeats: int) -> 
         def policy(params, obs, key):
             return ppo.act(network, params, obs, key)[0]
 
-        def python_loop():
-            jax.block_until_ready(stori_jax.rollout(env, policy, params, jax.random.PRNGKey(1),
-                                                    steps))
+        state = dict(obs=obs)
+
+        def python_loop():  # continues from the last observation, as the compiled loop does
+            traj = stori_jax.rollout(env, policy, params, jax.random.PRNGKey(1), steps,
+                                     obs=state["obs"])
+            state["obs"] = jax.block_until_ready(traj).last_obs
 
         python_loop()  # compile
         python = median_rate(python_loop, steps * num_envs, repeats)
 
-        env.reset()
+        obs, _ = env.reset()
         handle, step = env.xla()
 
         def body(carry, key):
@@ -53,11 +56,11 @@ def measure(game: str, preset: str, num_envs: int, steps: int, repeats: int) -> 
             return (handle, out[0]), (obs, actions) + out[1:]
 
         scanned = jax.jit(lambda carry, keys: jax.lax.scan(body, carry, keys))
-        state = dict(carry=(handle, jnp.asarray(obs)))
+        scan_state = dict(carry=(handle, jnp.asarray(obs)))  # the env was reset: start afresh
 
         def compiled_loop():
             keys = jax.random.split(jax.random.PRNGKey(1), steps)
-            state["carry"], traj = scanned(state["carry"], keys)
+            scan_state["carry"], traj = scanned(scan_state["carry"], keys)
             jax.block_until_ready(traj)
 
         compiled_loop()  # compile
