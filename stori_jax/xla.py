@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.experimental import io_callback
 
-from stori_jax.backends.layout import RAM_SIZE, SCREEN
+from stori_jax.backends.layout import SCREEN, buffer_specs
 from stori_jax.core import EnvState, WorkerOutputs, before_step, finish_step
 from stori_jax.functional.preprocess import frames_shape
 
@@ -48,14 +48,11 @@ def new_epoch() -> int:
 def output_shapes(plan) -> WorkerOutputs:
     """What one step's callback returns; no screens where the observation is the RAM."""
     b = plan.num_envs
+    shapes = buffer_specs(b, plan.frame_skip)  # the workers' output buffers
     frames = frames_shape(plan.frames_layout, b, SCREEN) if plan.obs != "ram" else (0,)
-    shapes = dict(frames=(frames, np.uint8), ram=((b, RAM_SIZE), np.uint8),
-                  ram_rendered=((b,), np.uint8), reward=((b,), np.float32),
-                  terminated=((b,), np.uint8), truncated=((b,), np.uint8),
-                  lives=((b,), np.int32), event_fired=((b,), np.int32),
-                  episode_return=((b,), np.float32), episode_length=((b,), np.int32))
-    return WorkerOutputs(**{name: jax.ShapeDtypeStruct(shape, dtype)
-                            for name, (shape, dtype) in shapes.items()})
+    shapes["frames"] = (frames, np.uint8)  # as the backend hands them over
+    return WorkerOutputs(**{name: jax.ShapeDtypeStruct(*shapes[name])
+                            for name in WorkerOutputs._fields})
 
 
 def initial_handle(state: EnvState, reset_pending, epoch: int) -> XlaHandle:
