@@ -433,7 +433,8 @@ class Env:
     def _xla_emulate_step(self, epoch, steps, key, actions, executed, event_u, event_active,
                           ram_render, noops, reset_first):
         """Run the emulators for one step of env.xla(); return copies of their outputs (the
-        buffers are reused by the next step).  No JAX in here: this runs inside a callback."""
+        buffers are reused by the next step).  No JAX computation in here: this runs inside a
+        callback (device_get of numpy arrays only passes them through)."""
         self._check_open()
         if int(epoch) != self._xla_epoch or not self._xla_driven:
             raise RuntimeError("stale xla handle: it comes from an earlier xla() of this env "
