@@ -12,6 +12,11 @@ Anything else (2.1 events and RAM-obs modes write the RAM; ``frame`` granularity
 or a mask per emulator frame) raises ValueError naming what needs the ``subproc`` backend.
 Same seed -> same run on this backend too, but envpool ships its own emulator build and seeds it
 its own way, so runs are not bit-identical to the ``subproc`` backend.
+
+No-op starts: envpool plays at least one NOOP frame at every reset (its ``noop_max=N`` draws
+1..N frames), so this backend passes ``noop_max + 1`` and an episode starts after 1..noop_max+1
+NOOP frames (one frame later than on ``subproc``, which plays 0..noop_max; the same number of
+possible starts).  With the default ``noop_max=0`` every episode starts one frame in.
 """
 
 from __future__ import annotations
@@ -62,17 +67,17 @@ class EnvpoolBackend:
 
         game = get_game(plan.game)
         task = "".join(part.capitalize() for part in game.rom_id.split("_")) + "-v5"
+        if task not in envpool.list_all_envs():
+            raise ValueError(f"envpool has no Atari task {task!r} for game {plan.game!r}; "
+                             "use backend='subproc' (the default), which runs every ale-py game")
         b = plan.num_envs
-        try:
-            self.pool = envpool.make(
-                task, env_type="gymnasium", num_envs=b, batch_size=b, seed=seed,
-                num_threads=0, img_height=SCREEN[0], img_width=SCREEN[1], gray_scale=False,
-                stack_num=1, frame_skip=plan.frame_skip, noop_max=plan.noop_max + 1,
-                episodic_life=False, reward_clip=False, repeat_action_probability=0.0,
-                use_fire_reset=False, full_action_space=False,
-                max_episode_steps=max(1, max_episode_frames // plan.frame_skip))
-        except Exception as e:  # envpool raises bare errors for unknown tasks
-            raise ValueError(f"envpool has no Atari task {task!r} for game {plan.game!r}") from e
+        self.pool = envpool.make(
+            task, env_type="gymnasium", num_envs=b, batch_size=b, seed=seed,
+            num_threads=0, img_height=SCREEN[0], img_width=SCREEN[1], gray_scale=False,
+            stack_num=1, frame_skip=plan.frame_skip, noop_max=plan.noop_max + 1,
+            episodic_life=False, reward_clip=False, repeat_action_probability=0.0,
+            use_fire_reset=False, full_action_space=False,
+            max_episode_steps=-(-max_episode_frames // plan.frame_skip))  # as subproc: the step that reaches it
         self.num_envs = b
         # the subproc backend's buffers, but one max-pooled screen per env, channels first
         self.views = {name: np.zeros(shape, dtype)

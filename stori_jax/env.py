@@ -35,6 +35,7 @@ def emulator_seeds(seed: int, num_envs: int) -> list[int]:
 
 # seeds feed 32-bit JAX keys and envpool's int32 seed: larger ones would alias smaller ones
 MAX_SEED = 2**31 - 1
+MAX_INT32 = 2**31 - 1  # frame counts and no-op draws are int32 in JAX and in envpool
 
 
 def resolve_config(game: str, preset: str | None, config: Config | None) -> Config:
@@ -82,8 +83,8 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
     if not isinstance(autoreset, (bool, np.bool_)):
         raise ValueError(f"autoreset must be True or False, got {autoreset!r}")
     frame_skip = check_int("frame_skip", frame_skip, 1)
-    max_episode_frames = check_int("max_episode_frames", max_episode_frames, 1)
-    noop_max = check_int("noop_max", noop_max, 0)
+    max_episode_frames = check_int("max_episode_frames", max_episode_frames, 1, MAX_INT32)
+    noop_max = check_int("noop_max", noop_max, 0, MAX_INT32 - 1)
     if obs is None:
         obs = "ram" if cfg.ram_observation else "atari84"
     if obs not in OBS_KINDS:

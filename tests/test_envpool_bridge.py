@@ -110,3 +110,54 @@ def test_a_timeout_is_refused_before_anything_is_sent():
         with pytest.raises(ValueError, match=r"recv\(timeout=...\) needs backend='subproc'"):
             env.recv(timeout=1.0)
         env.recv()  # the step was neither lost nor half-done
+
+
+def _noop_frames_played(rams):
+    """For each env's reset RAM, how many NOOP frames a bare ale-py Breakout played to reach it."""
+    from ale_py import ALEInterface, LoggerMode, roms
+
+    ALEInterface.setLoggerMode(LoggerMode.Error)
+    ale = ALEInterface()
+    ale.setFloat("repeat_action_probability", 0.0)
+    ale.loadROM(roms.get_rom_path("breakout"))
+    ale.reset_game()
+    reference = []
+    for _ in range(8):
+        reference.append(ale.getRAM().copy())
+        ale.act(0)
+    return [[k for k, r in enumerate(reference) if np.array_equal(r, ram)] for ram in rams]
+
+
+@pytest.mark.parametrize("backend, noop_max, starts", [
+    ("subproc", 0, {0}), ("subproc", 2, {0, 1, 2}),
+    ("envpool", 0, {1}), ("envpool", 2, {1, 2, 3}),  # envpool always plays at least one
+])
+def test_noop_starts_play_the_documented_number_of_frames(backend, noop_max, starts):
+    cfg = stori_jax.Config(ram_observation=True)
+    kw = EP if backend == "envpool" else dict(autoreset=False, granularity="step")
+    with stori_jax.make("Breakout", config=cfg, num_envs=16, seed=0, noop_max=noop_max,
+                        **kw) as env:
+        obs, _ = env.reset()
+        played = _noop_frames_played(np.asarray(obs))
+    assert all(len(p) == 1 for p in played), played  # each start is one known frame
+    # 16 envs over at most 3 starts: every start shows up (each is missed with prob <= (2/3)^16)
+    assert {p[0] for p in played} == starts
+
+
+def test_truncation_comes_at_the_same_step_as_on_subproc():
+    """max_episode_frames 6 at frame skip 4: the second step (frames 5-8) reaches it."""
+    for backend in ("envpool", "subproc"):
+        kw = EP if backend == "envpool" else dict(autoreset=False, granularity="step")
+        with stori_jax.make("Breakout", num_envs=1, seed=0, obs="ram", max_episode_frames=6,
+                            **kw) as env:
+            env.reset()
+            truncated = [bool(env.step(np.zeros(1, np.int32))[3][0]) for _ in range(2)]
+        assert truncated == [False, True], backend
+
+
+@pytest.mark.parametrize("name, value", [("noop_max", 2**31), ("max_episode_frames", 2**40)])
+def test_int32_overflow_is_named_before_any_backend_starts(name, value):
+    for backend in ("envpool", "subproc"):
+        kw = EP if backend == "envpool" else {}
+        with pytest.raises(ValueError, match=rf"{name} must be in \[\d+, 2147483\d+\]"):
+            stori_jax.make("Breakout", num_envs=1, seed=0, **{name: value}, **kw)
