@@ -126,7 +126,10 @@ def cmd_train(args) -> int:
 
 
 def cmd_eval(args) -> int:
-    from baselines.evaluate import evaluate, write_result
+    import stori_jax
+    from baselines.evaluate import EVAL_SEED_OFFSET, evaluate, write_result
+    from stori_jax.env import MAX_SEED
+    from stori_jax.games import get_game
     from baselines.ppo import load_checkpoint
     from stori_jax.checks import check_int
     from stori_jax.cli import check_out
@@ -144,24 +147,37 @@ def cmd_eval(args) -> int:
         if args.policy is not None:
             raise ValueError("--policy applies to checkpoints only (--random plays the random "
                              "policy)")
-        game, preset, seed, policy = args.game, args.preset, args.seed or 0, "random"
+        game = get_game(args.game).name  # one spelling per game in the run folders
+        preset, seed, policy = args.preset, args.seed or 0, "random"
         out = args.out or run_dir(DEFAULT_ROOT, game, preset, "random", seed)
         checkpoint = None
     else:
         config = load_checkpoint(args.checkpoint)["config"]
-        for flag, value, trained in (("--game", args.game, config["game"]),
-                                     ("--preset", args.preset, config["preset"])):
+        game = args.game if args.game is None else get_game(args.game).name
+        # the training seed labels the result (and the table's seed column): it is the checkpoint's
+        for flag, value, trained in (("--game", game, get_game(config["game"]).name),
+                                     ("--preset", args.preset, config["preset"]),
+                                     ("--seed", args.seed, config["seed"])):
             if value is not None and value != trained:
-                raise ValueError(f"{flag} {value} differs from the checkpoint's {trained}")
+                raise ValueError(f"{flag} {value} differs from the checkpoint's {trained}"
+                                 + (" (to evaluate on other seeds, give --eval-seed)"
+                                    if flag == "--seed" else ""))
         game, preset, policy = config["game"], config["preset"], args.policy or "sampled"
-        seed = config["seed"] if args.seed is None else args.seed
+        seed = config["seed"]
         out, checkpoint = args.out or args.checkpoint.parent, args.checkpoint
     check_out("--out", out, directory=True)
+    if args.eval_seed is None:  # the default eval seed must be a valid seed too
+        check_int("--seed + 10000 (the default --eval-seed)", seed + EVAL_SEED_OFFSET, 0,
+                  MAX_SEED)
+    if policy == "greedy" and not stori_jax.preset(game, preset).components():
+        print(f"note: {game} {preset} has no randomness once the policy is greedy, so every "
+              "episode plays the same (sampled evaluation varies)")
     result = evaluate(game, preset, policy=policy, episodes=args.episodes, seed=seed,
                       eval_seed=args.eval_seed, num_envs=args.num_envs, checkpoint=checkpoint,
                       progress=not args.quiet)
     print(f"{game} {preset} {policy}: mean return {result['mean_return']:.2f} ± "
-          f"{result['std_return']:.2f} (std over {args.episodes} episodes, eval seed "
+          f"{result['std_return']:.2f} (std over {args.episodes} "
+          f"episode{'s' * (args.episodes != 1)}, eval seed "
           f"{result['eval_seed']}); wrote {write_result(result, out)}")
     return 0
 

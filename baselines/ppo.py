@@ -89,6 +89,7 @@ class PPOConfig:
         import stori_jax
 
         stori_jax.preset(self.game, self.preset)  # unknown game or preset: a clear ValueError
+        object.__setattr__(self, "game", stori_jax.get_game(self.game).name)  # one spelling
         for name in ("seed", "total_steps", "num_envs", "num_steps", "num_minibatches",
                      "update_epochs", "checkpoint_every", "augment_shift"):
             minimum = 0 if name in ("seed", "augment_shift") else 1
@@ -97,6 +98,9 @@ class PPOConfig:
             object.__setattr__(self, name, check_real(name, getattr(self, name), 0, 1))
         for name in ("learning_rate", "clip_coef", "ent_coef", "vf_coef", "max_grad_norm"):
             object.__setattr__(self, name, check_real(name, getattr(self, name), 0))
+        for name in ("learning_rate", "max_grad_norm"):  # at 0 the policy never changes
+            if getattr(self, name) == 0:
+                raise ValueError(f"{name} must be > 0, got 0")
         for name in ("anneal_lr", "clip_vloss"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
@@ -147,7 +151,8 @@ class PPOConfig:
                 try:
                     typed[name] = kind(text)
                 except ValueError:
-                    raise ValueError(f"{name} must be a {kind.__name__}, got {text!r}") from None
+                    kind_name = {int: "an int", float: "a number"}.get(kind, kind.__name__)
+                    raise ValueError(f"{name} must be {kind_name}, got {text!r}") from None
         return dataclasses.replace(base, **typed)
 
 

@@ -147,6 +147,10 @@ def test_ppo_config_fields_are_checked(field, value, message):
         tiny(**{field: value})
 
 
+def test_ppo_config_spells_the_game_one_way():
+    assert tiny(game="BREAKOUT").game == tiny(game="breakout").game == "Breakout"
+
+
 def test_ppo_config_stores_plain_python_numbers():
     config = tiny(num_envs=np.int64(2), gamma=np.float32(0.5), learning_rate=1)
     assert type(config.num_envs) is int and type(config.gamma) is float
@@ -245,6 +249,8 @@ def test_resume_refuses_another_config(uninterrupted, tmp_path):
     (dict(preset="9.9"), "preset"), (dict(game="Pong2"), "game"), (dict(seed=-1), "seed"),
     (dict(action_head="tree"), "action_head must be one of"),
     (dict(action_head="factored"), "full 18 actions.*Breakout has 4"),
+    (dict(learning_rate=0), "learning_rate must be > 0"),
+    (dict(max_grad_norm=0.0), "max_grad_norm must be > 0"),
 ])
 def test_bad_hyperparameters_are_named(kw, match):
     with pytest.raises(ValueError, match=match):
@@ -255,7 +261,7 @@ def test_overrides_are_typed():
     config = ppo.PPOConfig.from_overrides(tiny(), {"learning_rate": "1e-3", "anneal_lr": "false",
                                                    "num_envs": "8"})
     assert (config.learning_rate, config.anneal_lr, config.num_envs) == (1e-3, False, 8)
-    with pytest.raises(ValueError, match="num_envs must be a int"):
+    with pytest.raises(ValueError, match="num_envs must be an int"):
         ppo.PPOConfig.from_overrides(tiny(), {"num_envs": "eight"})
 
 
@@ -374,8 +380,23 @@ def test_cli_train_refuses_to_overwrite_and_evaluates(uninterrupted, tmp_path, c
     assert "--resume" in capsys.readouterr().err
     assert main(["eval", "--checkpoint", str(full / "checkpoint.pkl"), "--episodes", "1",
                  "--policy", "greedy", "--num-envs", "1", "--out", str(tmp_path), "--quiet",
-                 "--preset", "3.1"]) == 2
-    assert "differs from the checkpoint" in capsys.readouterr().err
+                 "--preset", "3.1", "--game", "breakout"]) == 2
+    assert "--preset 3.1 differs from the checkpoint" in capsys.readouterr().err  # not --game
+    assert main(["eval", "--checkpoint", str(full / "checkpoint.pkl"), "--seed", "5",
+                 "--out", str(tmp_path), "--quiet"]) == 2
+    assert "--seed 5 differs from the checkpoint's 0 (to evaluate on other seeds, give " \
+        "--eval-seed)" in capsys.readouterr().err
+
+
+def test_cli_random_evaluation_spells_the_game_one_way(tmp_path, capsys):
+    assert main(["eval", "--random", "--game", "breakout", "--preset", "3.1", "--episodes", "1",
+                 "--num-envs", "1", "--out", str(tmp_path), "--quiet"]) == 0
+    assert json.loads((tmp_path / "eval-random.json").read_text())["game"] == "Breakout"
+    assert "(std over 1 episode, eval seed 10000)" in capsys.readouterr().out
+    assert main(["eval", "--random", "--game", "Breakout", "--preset", "3.1",
+                 "--seed", str(2**31 - 10000), "--quiet"]) == 2
+    assert "--seed + 10000 (the default --eval-seed) must be in [0, 2147483647]" \
+        in capsys.readouterr().err
 
 
 def test_suite_plays_a_checkpoint_on_its_games_presets(uninterrupted, tmp_path, capsys):
