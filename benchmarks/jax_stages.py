@@ -5,7 +5,7 @@
 
 Stages, on real-sized inputs (B environments, two 210x160x3 screens each):
 copy of the two screens into JAX, per-frame blackout mask, torch mask, max-pool, luma + area
-resize to 84x84, frame stack, the whole `after_step` of a masked preset, and `before_step`
+resize to 84x84, frame stack, mask + max-pool + atari84 in one jit, and `before_step`
 (the draws) of a type-1 preset.  Writes benchmarks/results/jax-stages-<date>-<host>.{json,md}.
 """
 
@@ -102,8 +102,8 @@ def main(argv=None):
     table = "\n".join(lines) + "\n"
     args.out.mkdir(parents=True, exist_ok=True)
     stem = args.out / f"jax-stages-{meta['date']}-{meta['host']}"
-    stem.with_suffix(".json").write_text(json.dumps(dict(meta=meta, results=results), indent=1))
-    stem.with_suffix(".md").write_text(table)
+    Path(f"{stem}.json").write_text(json.dumps(dict(meta=meta, results=results), indent=1))
+    Path(f"{stem}.md").write_text(table)
     print(table)
 
 

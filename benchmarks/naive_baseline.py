@@ -3,7 +3,9 @@ AsyncVectorEnv), the perturbations written as per-env numpy wrappers.
 
 Small and honest: frameskip=1 envs wrapped so that each agent step repeats the action for
 ``frame_skip`` frames, applies the perturbation per emulator frame (as the reference does), and
-max-pools the last two screens.  Randomness comes from a seeded numpy Generator per env.
+max-pools the last two screens.  A 2.2 preset's concept-2 parts act only on the agent steps its
+schedule puts in concept 2 (counted from each episode's start), as in stori-jax, so both run the
+same workload.  Randomness comes from a seeded numpy Generator per env.
 """
 
 from __future__ import annotations
@@ -26,10 +28,12 @@ class StoriNumpyWrapper(gym.Wrapper):
         self.game = game
         self.frame_skip = frame_skip
         self.rng = np.random.default_rng(seed)
-        parts = {type(p).__name__: p for _, p, _ in config.components()}
-        self.noise = parts.get("ActionNoise")
-        self.event = parts.get("RandomEvent")
-        self.mask = parts.get("ObservationMask")
+        parts = {type(p).__name__: (p, drifted) for _, p, drifted in config.components()}
+        self.drift = config.drift
+        self.drifted = {name: drifted for name, (_, drifted) in parts.items()}
+        self.noise = parts.get("ActionNoise", (None,))[0]
+        self.event = parts.get("RandomEvent", (None,))[0]
+        self.mask = parts.get("ObservationMask", (None,))[0]
         self.rule = game.event_modes[self.event.mode] if self.event else None
         self.replacement = (np.array(game.replacement_actions(self.noise))
                             if self.noise else None)
@@ -49,10 +53,27 @@ class StoriNumpyWrapper(gym.Wrapper):
         self.start_ram = self.ale.getRAM().copy()
         self.prev_ram = self.start_ram.copy()
         self.rule_state = self.rule.new_state() if self.rule else None
+        self.episode_step = 0
+        self.active = self._active_parts()
         return self._mask(obs), info
 
+    def _active_parts(self) -> set:
+        """The part types acting on this agent step: all of them, except that a 2.2 preset's
+        concept-2 parts act only where its schedule (STORI_SPEC section 3) says concept 2."""
+        concept2 = False
+        if self.drift is not None:
+            k, period = self.episode_step, self.drift.period
+            if self.drift.schedule == "sudden":
+                concept2 = k >= period
+            elif self.drift.schedule == "cyclic":
+                concept2 = (k // period) % 2 == 1
+            else:  # gradual
+                concept2 = self.rng.random() < min(max((k - period) / period, 0.0), 1.0)
+        return {name for name, drifted in self.drifted.items() if concept2 or not drifted}
+
     def _mask(self, frame):
-        if self.mask is None or self.mask.kind == "ram" or self.rng.random() >= self.mask.prob:
+        if (self.mask is None or "ObservationMask" not in self.active or self.mask.kind == "ram"
+                or self.rng.random() >= self.mask.prob):
             return frame
         frame = frame.copy()
         if self.hidden is not None:
@@ -63,7 +84,8 @@ class StoriNumpyWrapper(gym.Wrapper):
         return frame
 
     def _render_ram_obs(self, frame):
-        if self.mask is None or self.mask.kind != "ram" or self.rng.random() >= self.mask.prob:
+        if (self.mask is None or "ObservationMask" not in self.active or self.mask.kind != "ram"
+                or self.rng.random() >= self.mask.prob):
             return frame
         writes = self.game.ram_obs_modes[self.mask.mode].writes(self.ale.getRAM())
         if writes is None:
@@ -80,17 +102,20 @@ class StoriNumpyWrapper(gym.Wrapper):
         total, screens = 0.0, []
         terminated = truncated = False
         info = {}
+        self.active = self._active_parts()
+        noise = self.noise if "ActionNoise" in self.active else None
+        rule = self.rule if "RandomEvent" in self.active else None
         for f in range(self.frame_skip):
             a = action
-            if self.noise is not None and self.rng.random() < self.noise.prob:
+            if noise is not None and self.rng.random() < noise.prob:
                 a = int(self.rng.choice(self.replacement))
-            if self.rule is not None and self.rule.pre_frame is not None:
+            if rule is not None and rule.pre_frame is not None:
                 writes, _ = self.rule.pre_frame(self.start_ram, self.rule_state, self.rng.random(),
                                                 self.event.prob, True)
                 for address, value in writes.items():
                     self.ale.setRAM(address, value)
             obs, reward, terminated, truncated, info = self.env.step(a)
-            if self.rule is not None and self.rule.post_frame is not None:
+            if rule is not None and rule.post_frame is not None:
                 ram = self.ale.getRAM()
                 out = self.rule.post_frame(self.prev_ram, ram, self.start_ram, self.rule_state,
                                            self.rng.random(), self.rng.random(),
@@ -99,6 +124,7 @@ class StoriNumpyWrapper(gym.Wrapper):
                     self.ale.setRAM(address, value)
                 if out.zero_reward:
                     reward = 0.0
+            if self.rule is not None:  # tracked in concept 1 too, for when concept 2 begins
                 self.prev_ram = self.ale.getRAM().copy()
             total += reward
             if f >= self.frame_skip - 2:
@@ -106,6 +132,7 @@ class StoriNumpyWrapper(gym.Wrapper):
             if terminated or truncated:
                 break
         frame = np.maximum(screens[0], screens[-1]) if screens else obs
+        self.episode_step += 1
         return frame, total, terminated, truncated, info
 
 

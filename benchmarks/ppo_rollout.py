@@ -1,9 +1,10 @@
 """Where PPO's training time goes, measured in one run on one machine: stepping the envs with
 random actions (no network), PPO's rollout with agent compute overlapping emulation (two
 half-batches stepped in turn, as baselines/ppo.py does), the same rollout without overlap (one
-batch: choose, then step), and the jitted update.  Writes JSON and a markdown table.
+batch: choose, then step), and the jitted update, with the game's evidence hyperparameters
+(``GAME_HYPERPARAMETERS`` in baselines/run_evidence.py).  Writes JSON, a markdown table and a PNG.
 
-    python benchmarks/ppo_rollout.py [--game Breakout] [--network nips] [--repeats 3] [--out DIR]
+    python benchmarks/ppo_rollout.py [--game Breakout] [--preset 3.1] [--network nips] [--repeats 3] [--out DIR]
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import numpy as np
 
 import stori_jax
 from baselines import ppo
-from baselines.run_evidence import EVIDENCE_HYPERPARAMETERS
+from baselines.run_evidence import EVIDENCE_HYPERPARAMETERS, GAME_HYPERPARAMETERS
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -121,20 +122,21 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=RESULTS, help="directory for the results")
     args = parser.parse_args()
     config = ppo.PPOConfig(game=args.game, preset=args.preset,
-                           **{**EVIDENCE_HYPERPARAMETERS, "network": args.network})
+                           **{**GAME_HYPERPARAMETERS.get(args.game, EVIDENCE_HYPERPARAMETERS),
+                              "network": args.network})
     results = measure(config, args.repeats)
     text = markdown(config, results)
     print(text)
     day = datetime.date.today().isoformat()
-    stem = args.out / f"ppo-rollout-{day}-{args.game}-{args.network}"
+    stem = f"ppo-rollout-{day}-{args.game}-{args.preset}-{args.network}"  # dots: no with_suffix
     args.out.mkdir(parents=True, exist_ok=True)
-    stem.with_suffix(".json").write_text(json.dumps(dict(
+    (args.out / f"{stem}.json").write_text(json.dumps(dict(
         config={**vars(args), "out": str(args.out)},
         machine=platform.processor() or platform.machine(),
         results=results), indent=1))
-    stem.with_suffix(".md").write_text(text)
-    plot(stage_rates(results), stem.with_suffix(".png"), title=text.splitlines()[0])
-    print(f"wrote {stem}.json, .md and .png")
+    (args.out / f"{stem}.md").write_text(text)
+    plot(stage_rates(results), args.out / f"{stem}.png", title=text.splitlines()[0])
+    print(f"wrote {args.out / stem}.json, .md and .png")
 
 
 def plot(rows: list[tuple[str, float]], path: Path, title: str) -> None:

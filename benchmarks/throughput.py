@@ -2,6 +2,7 @@
 
     python benchmarks/throughput.py            # everything (about 18 minutes on 2 cores)
     python benchmarks/throughput.py --quick    # Breakout only, fewer sizes (about 3 minutes)
+    python benchmarks/throughput.py --games Boxing --presets 3.1 2.2 --sizes 32   # a subset
 
 Measured (agent steps per second, frame skip 4, summed over the batch):
 - emulator limit: W plain processes each looping bare ``ale_py.ALEInterface`` emulators doing
@@ -9,7 +10,14 @@ Measured (agent steps per second, frame skip 4, summed over the batch):
 - raw envpool (same B, W threads, raw RGB) and ale-py's ``AtariVectorEnv``;
 - the naive way: gymnasium AsyncVectorEnv, one process per env, numpy STORI wrappers;
 - stori-jax on both backends for every paper preset, obs ``raw`` and ``atari84``, and a sweep
-  over B for 3.1.
+  over B for 3.1.  envpool rows run ``granularity="step"`` (what that backend supports); the
+  presets it cannot run have no envpool row.
+
+2.2 presets switch concept at agent step T of each episode (300 or 600 in the paper's presets),
+so their runs warm up for T steps and are timed from there, in concept 2 for every env whose
+episode has not ended before T (with a random policy, Breakout's rarely last that long); the
+table's "concept 2" column gives the share of timed steps spent in concept 2.  The naive
+baseline follows the same schedule and warm-up.
 
 Writes benchmarks/results/<date>-<host>.json, a markdown table (.md) and PNG plots.
 """
@@ -99,7 +107,10 @@ def emulator_limit(game, batch, workers, seconds):
 
 # -- peers ------------------------------------------------------------------------------------
 
-def _timed_loop(step, num_envs, num_actions, seconds, warmup=20):
+WARMUP = 20  # agent steps before timing
+
+
+def _timed_loop(step, num_envs, num_actions, seconds, warmup=WARMUP):
     rng = np.random.default_rng(0)
     actions = rng.integers(0, num_actions, (256, num_envs)).astype(np.int32)
     for t in range(warmup):
@@ -152,10 +163,11 @@ def naive(game, preset, batch, seconds):
 
     import stori_jax
 
-    env = make_naive_vector_env(game, stori_jax.preset(game, preset), batch, seed=0)
+    config = stori_jax.preset(game, preset)
+    env = make_naive_vector_env(game, config, batch, seed=0)
     env.reset(seed=0)
     rate = _timed_loop(lambda a: env.step(a), batch, stori_jax.get_game(game).num_actions,
-                       seconds, warmup=5)
+                       seconds, warmup=config.drift.period if config.drift else 5)
     env.close()
     return rate
 
@@ -171,9 +183,16 @@ def stori(game, preset, batch, seconds, obs, backend):
     env = stori_jax.make(game, preset, num_envs=batch, seed=0, obs=obs, backend=backend,
                          **kwargs)
     env.reset()
-    rate = _timed_loop(lambda a: env.step(a), batch, env.num_actions, seconds)
+    concepts = []  # per step, (B,) on the device: read after timing, not during it
+
+    def step(actions):
+        concepts.append(env.step(actions)[-1]["concept"])
+
+    warmup = env.config.drift.period if env.config.drift else WARMUP  # 2.2: to concept 2
+    rate = _timed_loop(step, batch, env.num_actions, seconds, warmup=warmup)
     env.close()
-    return rate
+    concept2 = float(np.mean(np.stack(concepts[warmup:]))) if env.config.drift else None
+    return rate, concept2
 
 
 def envpool_supports(game, preset):
@@ -192,16 +211,18 @@ def envpool_supports(game, preset):
 def plan_measurements(args):
     import stori_jax
 
-    games = ["Breakout"] if args.quick else list(stori_jax.STORI_GAMES)
-    presets = [(g, p) for g, p in stori_jax.list_presets() if g in games]
+    games = args.games or (["Breakout"] if args.quick else list(stori_jax.STORI_GAMES))
+    presets = [(g, p) for g, p in stori_jax.list_presets()
+               if g in games and (args.presets is None or p in args.presets)]
     w = args.workers
     jobs = []
+    sweep = "Breakout" in games and (args.presets is None or "3.1" in args.presets)
     for g in games:
-        if g == "Breakout" and args.batch in args.sizes:
+        if sweep and g == "Breakout" and args.batch in args.sizes:
             continue  # measured in the sweep below
         jobs.append(dict(kind="emulator limit", game=g, preset="-", B=args.batch, backend="-",
                          obs="raw", fn=lambda g=g: emulator_limit(g, args.batch, w, args.seconds)))
-    for b in args.sizes:
+    for b in args.sizes if sweep else ():
         jobs.append(dict(kind="emulator limit", game="Breakout", preset="-", B=b, backend="-",
                          obs="raw", fn=lambda b=b: emulator_limit("Breakout", b, w, args.seconds)))
         jobs.append(dict(kind="envpool raw", game="Breakout", preset="-", B=b, backend="envpool",
@@ -221,7 +242,7 @@ def plan_measurements(args):
                              fn=lambda g=g, p=p: naive(g, p, args.batch, args.seconds)))
         for obs in ("raw", "atari84"):
             for backend in ("subproc", "envpool"):
-                if backend == "subproc" and p == "3.1" and g == "Breakout" \
+                if sweep and backend == "subproc" and p == "3.1" and g == "Breakout" \
                         and args.batch in args.sizes:
                     continue  # measured in the sweep
                 if backend == "envpool" and not envpool_supports(g, p):
@@ -241,7 +262,10 @@ def run(args):
     for job in tqdm(jobs, desc="throughput", unit="run"):
         fn = job.pop("fn")
         try:
-            job["steps_per_s"] = float(fn())
+            out = fn()
+            if job["kind"] == "stori-jax":
+                out, job["concept2_share"] = out
+            job["steps_per_s"] = float(out)
         except Exception as e:  # noqa: BLE001 - record and go on: one failure must not lose the run
             job["steps_per_s"] = None
             job["error"] = f"{type(e).__name__}: {e}"
@@ -255,7 +279,7 @@ def add_ratios(results):
               if r["kind"] == "emulator limit"}
     own_31 = {(r["game"], r["B"], r["obs"], r["backend"]): r["steps_per_s"] for r in results
               if r["kind"] == "stori-jax" and r["preset"] == "3.1"}
-    naive_rate = {(r["game"], r["preset"]): r["steps_per_s"] for r in results
+    naive_rate = {(r["game"], r["preset"], r["B"]): r["steps_per_s"] for r in results
                   if r["kind"] == "naive gymnasium"}
     raw = {(r["game"], r["preset"], r["B"], r["backend"]): r["steps_per_s"] for r in results
            if r["kind"] == "stori-jax" and r["obs"] == "raw"}
@@ -268,7 +292,7 @@ def add_ratios(results):
         if r["kind"] == "stori-jax":
             base = own_31.get((r["game"], r["B"], r["obs"], r["backend"]))
             r["vs_own_3.1"] = rate / base if base else None
-            n = naive_rate.get((r["game"], r["preset"]))
+            n = naive_rate.get((r["game"], r["preset"], r["B"]))
             r["vs_naive"] = rate / n if n else None
             if r["obs"] == "atari84":
                 rr = raw.get((r["game"], r["preset"], r["B"], r["backend"]))
@@ -281,18 +305,23 @@ def fmt(x, spec=".2f"):
 
 
 def markdown(results, meta) -> str:
-    lines = [f"# Throughput, {meta['date']} on {meta['host']} ({meta['cores']} cores, "
-             f"W = {meta['workers']} workers/threads)", "",
-             "Agent steps per second summed over the batch (frame skip 4). Ratios are to the "
-             "emulator limit of the same game and B, measured in this run.", "",
+    lines = [f"# Throughput, {meta['date']} on {meta['host']} ({meta['cores']} cores)", "",
+             "Agent steps per second summed over the batch (frame skip 4), each the median of "
+             f"{WINDOWS} windows. W = {meta['workers']} worker processes for the emulator limit, "
+             "W threads for raw envpool and ale-py; stori-jax uses its default worker split and "
+             "envpool its own thread count. \"vs limit\" is to the emulator limit of the same "
+             "game and B, \"vs naive\" to the naive baseline of the same preset and B, both "
+             "measured in this run. envpool rows run granularity='step'. \"concept 2\": the "
+             "share of a 2.2 preset's timed steps spent in concept 2.", "",
              "| kind | game | preset | backend | obs | B | steps/s | vs limit | vs own 3.1 | "
-             "vs naive | atari84/raw |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "vs naive | atari84/raw | concept 2 |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         lines.append(
             f"| {r['kind']} | {r['game']} | {r['preset']} | {r['backend']} | {r['obs']} | "
             f"{r['B']} | {fmt(r['steps_per_s'], '.0f')} | {fmt(r.get('vs_limit'))} | "
             f"{fmt(r.get('vs_own_3.1'))} | {fmt(r.get('vs_naive'))} | "
-            f"{fmt(r.get('atari84_vs_raw'))} |" + (f" error: {r['error']}" if "error" in r else ""))
+            f"{fmt(r.get('atari84_vs_raw'))} | {fmt(r.get('concept2_share'))} |"
+            + (f" error: {r['error']}" if "error" in r else ""))
     return "\n".join(lines) + "\n"
 
 
@@ -351,28 +380,53 @@ def plots(results, stem: Path):
     plt.close(fig)
 
 
+def _check_arguments(parser, args):
+    import stori_jax
+
+    if not args.seconds > 0:
+        parser.error(f"--seconds must be > 0, got {args.seconds}")
+    for name in ("batch", "workers"):
+        if getattr(args, name) < 1:
+            parser.error(f"--{name} must be >= 1, got {getattr(args, name)}")
+    if args.sizes is not None and min(args.sizes) < 1:
+        parser.error(f"--sizes must all be >= 1, got {args.sizes}")
+    for game in args.games or ():
+        if game not in stori_jax.STORI_GAMES:
+            parser.error(f"--games: {game!r} is not one of {list(stori_jax.STORI_GAMES)}")
+    names = sorted({p for _, p in stori_jax.list_presets()})
+    for preset in args.presets or ():
+        if preset not in names:
+            parser.error(f"--presets: {preset!r} is not one of {names}")
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--quick", action="store_true", help="Breakout only, B in {8, 32}")
+    parser.add_argument("--quick", action="store_true",
+                        help="Breakout only, B in {8, 32} (unless --games / --sizes say otherwise)")
     parser.add_argument("--seconds", type=float, default=3.0, help="measuring time per run")
     parser.add_argument("--batch", type=int, default=32, help="B for the per-preset runs")
-    parser.add_argument("--sizes", type=int, nargs="+", default=[8, 16, 32, 64])
+    parser.add_argument("--sizes", type=int, nargs="+", default=None,
+                        help="B of the Breakout 3.1 sweep (default 8 16 32 64)")
+    parser.add_argument("--games", nargs="+", default=None, help="default: the four STORI games")
+    parser.add_argument("--presets", nargs="+", default=None,
+                        help="only these presets (e.g. 3.1 2.2); default: all")
     parser.add_argument("--workers", type=int, default=cores())
     parser.add_argument("--skip-naive", action="store_true")
     parser.add_argument("--out", type=Path, default=HERE / "results")
     args = parser.parse_args(argv)
-    if args.quick:
-        args.sizes = [8, 32]
+    _check_arguments(parser, args)
+    if args.sizes is None:
+        args.sizes = [8, 32] if args.quick else [8, 16, 32, 64]
     meta = dict(date=datetime.date.today().isoformat(), host=socket.gethostname(),
                 cores=cores(), workers=args.workers, python=platform.python_version(),
                 seconds=args.seconds, argv=sys.argv[1:])
     results = add_ratios(run(args))
     args.out.mkdir(parents=True, exist_ok=True)
     stem = args.out / f"{meta['date']}-{meta['host']}"
-    stem.with_suffix(".json").write_text(json.dumps(dict(meta=meta, results=results), indent=1))
+    Path(f"{stem}.json").write_text(json.dumps(dict(meta=meta, results=results), indent=1))
     table = markdown(results, meta)
-    stem.with_suffix(".md").write_text(table)
+    Path(f"{stem}.md").write_text(table)
     plots(results, stem)
     print(table)
     print(f"wrote {stem}.json, {stem}.md and PNG plots")
