@@ -48,6 +48,8 @@ def add_parsers(sub) -> None:
     ev.add_argument("--out", type=Path, default=None,
                     help="directory for eval-<policy>.json (default: the checkpoint's, or "
                          "results/train/<game>-<preset>/random-seed<S>)")
+    ev.add_argument("--force", action="store_true",
+                    help="replace an existing eval-<policy>.json in --out")
     ev.add_argument("--quiet", action="store_true")
 
     table = sub.add_parser("table", help="aggregate evaluations into the paper's table and plot "
@@ -102,6 +104,9 @@ def cmd_train(args) -> int:
     if not args.resume and (out / "checkpoint.pkl").exists():
         raise ValueError(f"{out} already holds a run: pass --resume to continue it, or another "
                          "--out")
+    if args.resume and not (out / "checkpoint.pkl").exists():
+        raise ValueError(f"--resume: {out} holds no checkpoint.pkl (a run stopped before its "
+                         "first checkpoint has nothing to continue): run without --resume")
     trained = config.num_iterations * config.batch_size
     if trained != config.total_steps:
         print(f"stori-jax: --steps {config.total_steps} rounds up to {trained} agent steps, whole "
@@ -166,6 +171,10 @@ def cmd_eval(args) -> int:
         seed = config["seed"]
         out, checkpoint = args.out or args.checkpoint.parent, args.checkpoint
     check_out("--out", out, directory=True)
+    existing = Path(out) / f"eval-{policy}.json"
+    if existing.exists() and not args.force:
+        raise ValueError(f"{existing} already holds an evaluation: pass --force to replace it, "
+                         "or another --out")
     if args.eval_seed is None:  # the default eval seed must be a valid seed too
         check_int("--seed + 10000 (the default --eval-seed)", seed + EVAL_SEED_OFFSET, 0,
                   MAX_SEED)

@@ -378,6 +378,9 @@ def test_cli_train_refuses_to_overwrite_and_evaluates(uninterrupted, tmp_path, c
     full, _ = uninterrupted
     assert main(["train", "ppo", "--game", "Breakout", "--out", str(full), "--quiet"]) == 2
     assert "--resume" in capsys.readouterr().err
+    assert main(["train", "ppo", "--game", "Breakout", "--out", str(tmp_path), "--resume",
+                 "--quiet"]) == 2
+    assert "holds no checkpoint.pkl" in capsys.readouterr().err
     assert main(["eval", "--checkpoint", str(full / "checkpoint.pkl"), "--episodes", "1",
                  "--policy", "greedy", "--num-envs", "1", "--out", str(tmp_path), "--quiet",
                  "--preset", "3.1", "--game", "breakout"]) == 2
@@ -393,6 +396,13 @@ def test_cli_random_evaluation_spells_the_game_one_way(tmp_path, capsys):
                  "--num-envs", "1", "--out", str(tmp_path), "--quiet"]) == 0
     assert json.loads((tmp_path / "eval-random.json").read_text())["game"] == "Breakout"
     assert "(std over 1 episode, eval seed 10000)" in capsys.readouterr().out
+    again = ["eval", "--random", "--game", "Breakout", "--preset", "3.1", "--episodes", "2",
+             "--num-envs", "1", "--out", str(tmp_path), "--quiet"]
+    assert main(again) == 2  # an earlier evaluation is not replaced by accident
+    assert "eval-random.json already holds an evaluation: pass --force" in capsys.readouterr().err
+    assert json.loads((tmp_path / "eval-random.json").read_text())["episodes"] == 1
+    assert main(again + ["--force"]) == 0
+    assert json.loads((tmp_path / "eval-random.json").read_text())["episodes"] == 2
     assert main(["eval", "--random", "--game", "Breakout", "--preset", "3.1",
                  "--seed", str(2**31 - 10000), "--quiet"]) == 2
     assert "--seed + 10000 (the default --eval-seed) must be in [0, 2147483647]" \
