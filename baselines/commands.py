@@ -133,11 +133,10 @@ def cmd_train(args) -> int:
 def cmd_eval(args) -> int:
     import stori_jax
     from baselines.evaluate import EVAL_SEED_OFFSET, evaluate, write_result
-    from stori_jax.env import MAX_SEED
-    from stori_jax.games import get_game
-    from baselines.ppo import load_checkpoint
+    from baselines.ppo import load_checkpoint, stori_game
     from stori_jax.checks import check_int
     from stori_jax.cli import check_out
+    from stori_jax.env import MAX_SEED
 
     if args.random == (args.checkpoint is not None):
         raise ValueError("give either --checkpoint PATH or --random (with --game and --preset)")
@@ -152,15 +151,15 @@ def cmd_eval(args) -> int:
         if args.policy is not None:
             raise ValueError("--policy applies to checkpoints only (--random plays the random "
                              "policy)")
-        game = get_game(args.game).name  # one spelling per game in the run folders
+        game = stori_game(args.game)  # one spelling per game in the run folders
         preset, seed, policy = args.preset, args.seed or 0, "random"
         out = args.out or run_dir(DEFAULT_ROOT, game, preset, "random", seed)
         checkpoint = None
     else:
         config = load_checkpoint(args.checkpoint)["config"]
-        game = args.game if args.game is None else get_game(args.game).name
+        game = args.game if args.game is None else stori_game(args.game)
         # the training seed labels the result (and the table's seed column): it is the checkpoint's
-        for flag, value, trained in (("--game", game, get_game(config["game"]).name),
+        for flag, value, trained in (("--game", game, stori_game(config["game"])),
                                      ("--preset", args.preset, config["preset"]),
                                      ("--seed", args.seed, config["seed"])):
             if value is not None and value != trained:

@@ -44,7 +44,9 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
         raise ValueError("give a checkpoint for the 'sampled' and 'greedy' policies, and none "
                          "for 'random'")
     episodes, num_envs = check_int("episodes", episodes, 1), check_int("num_envs", num_envs, 1)
-    game = stori_jax.get_game(game).name  # one spelling per game in the results
+    from baselines.ppo import stori_game
+
+    game = stori_game(game)  # one spelling per game in the results
     eval_seed = seed + EVAL_SEED_OFFSET if eval_seed is None else eval_seed
     num_envs = min(num_envs, episodes)
     if checkpoint is not None:

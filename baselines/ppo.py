@@ -88,8 +88,8 @@ class PPOConfig:
     def __post_init__(self):
         import stori_jax
 
-        stori_jax.preset(self.game, self.preset)  # unknown game or preset: a clear ValueError
-        object.__setattr__(self, "game", stori_jax.get_game(self.game).name)  # one spelling
+        object.__setattr__(self, "game", stori_game(self.game))
+        stori_jax.preset(self.game, self.preset)  # unknown preset: a clear ValueError
         for name in ("seed", "total_steps", "num_envs", "num_steps", "num_minibatches",
                      "update_epochs", "checkpoint_every", "augment_shift"):
             minimum = 0 if name in ("seed", "augment_shift") else 1
@@ -154,6 +154,18 @@ class PPOConfig:
                     kind_name = {int: "an int", float: "a number"}.get(kind, kind.__name__)
                     raise ValueError(f"{name} must be {kind_name}, got {text!r}") from None
         return dataclasses.replace(base, **typed)
+
+
+def stori_game(name: str) -> str:
+    """``name`` spelt as the STORI game it names; other games are refused (the baselines train
+    and evaluate on the paper's presets)."""
+    import stori_jax
+
+    game = stori_jax.get_game(name).name  # unknown to ale-py: a clear ValueError
+    if game not in stori_jax.STORI_GAMES:
+        raise ValueError(f"game must be one of the STORI games {list(stori_jax.STORI_GAMES)} "
+                         f"(the baselines play the paper's presets), got {name!r}")
+    return game
 
 
 # -- network --------------------------------------------------------------------------------------

@@ -345,6 +345,8 @@ def test_smoothing_is_the_mean_of_the_latest_episodes():
 
 @pytest.mark.parametrize("argv,match", [
     (["train", "ppo", "--game", "Pong2"], "unknown game"),
+    (["train", "ppo", "--game", "Pong"], "game must be one of the STORI games ['Breakout', "),
+    (["eval", "--random", "--game", "pong", "--preset", "3.1"], "the baselines play the paper"),
     (["train", "ppo", "--game", "Breakout", "--preset", "4"], "preset"),
     (["train", "ppo", "--game", "Breakout", "--set", "lr"], "FIELD=VALUE"),
     (["train", "ppo", "--game", "Breakout", "--set", "nope=1"],
