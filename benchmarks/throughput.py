@@ -1,7 +1,7 @@
 """Throughput of stori-jax next to the emulator limit and its peers, in ONE run on one machine.
 
     python benchmarks/throughput.py            # everything (about 18 minutes on 2 cores)
-    python benchmarks/throughput.py --quick    # Breakout only, fewer sizes (about 3 minutes)
+    python benchmarks/throughput.py --quick    # Breakout only, fewer sizes (about 7 minutes)
     python benchmarks/throughput.py --games Boxing --presets 3.1 2.2 --sizes 32   # a subset
 
 Measured (agent steps per second, frame skip 4, summed over the batch):
