@@ -124,7 +124,7 @@ class StoriNumpyWrapper(gym.Wrapper):
                     self.ale.setRAM(address, value)
                 if out.zero_reward:
                     reward = 0.0
-            if self.rule is not None:  # tracked in concept 1 too, for when concept 2 begins
+            if self.rule is not None and self.rule.post_frame is not None:  # in concept 1 too
                 self.prev_ram = self.ale.getRAM().copy()
             total += reward
             if f >= self.frame_skip - 2:

@@ -121,14 +121,18 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--out", type=Path, default=RESULTS, help="directory for the results")
     args = parser.parse_args()
-    config = ppo.PPOConfig(game=args.game, preset=args.preset,
-                           **{**GAME_HYPERPARAMETERS.get(args.game, EVIDENCE_HYPERPARAMETERS),
+    try:
+        game = ppo.stori_game(args.game)
+    except ValueError as e:
+        parser.error(f"--game: {e}")
+    config = ppo.PPOConfig(game=game, preset=args.preset,
+                           **{**GAME_HYPERPARAMETERS.get(game, EVIDENCE_HYPERPARAMETERS),
                               "network": args.network})
     results = measure(config, args.repeats)
     text = markdown(config, results)
     print(text)
     day = datetime.date.today().isoformat()
-    stem = f"ppo-rollout-{day}-{args.game}-{args.preset}-{args.network}"  # dots: no with_suffix
+    stem = f"ppo-rollout-{day}-{game}-{args.preset}-{args.network}"  # dots: no with_suffix
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / f"{stem}.json").write_text(json.dumps(dict(
         config={**vars(args), "out": str(args.out)},

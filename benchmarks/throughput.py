@@ -325,13 +325,12 @@ def markdown(results, meta) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plots(results, stem: Path):
+def plots(results, stem: Path, batch: int):
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7, 4.5))
     series = {}
     for r in results:
         if r["game"] != "Breakout" or r["preset"] not in ("-", "3.1") or r["steps_per_s"] is None:
@@ -340,10 +339,17 @@ def plots(results, stem: Path):
             continue
         label = r["kind"] + ("" if r["kind"] != "stori-jax" else f" {r['backend']} {r['obs']}")
         series.setdefault(label, []).append((r["B"], r["steps_per_s"]))
+    series = {label: sorted(set(points)) for label, points in series.items()
+              if len({b for b, _ in points}) > 1}
+    if series:  # a sweep over B was run
+        _plot_vs_batch(plt, series, stem)
+    _plot_presets(plt, results, stem, batch)
+
+
+def _plot_vs_batch(plt, series, stem: Path):
+    fig, ax = plt.subplots(figsize=(7, 4.5))
     for label, points in sorted(series.items()):
-        points = sorted(set(points))
-        if len(points) > 1:
-            ax.plot(*zip(*points), marker="o", label=label)
+        ax.plot(*zip(*points), marker="o", label=label)
     ax.set_xscale("log", base=2)
     ax.set_xlabel("batch size B")
     ax.set_ylabel("agent steps / s")
@@ -354,9 +360,12 @@ def plots(results, stem: Path):
     fig.savefig(stem.with_name(stem.name + "-vs-batch.png"), dpi=120)
     plt.close(fig)
 
-    rows = [r for r in results if r["kind"] == "stori-jax" and r.get("vs_limit") is not None
-            and r["B"] == max(x["B"] for x in results if x["preset"] not in ("-", "3.1"))
-            or (r["kind"] == "naive gymnasium" and r.get("vs_limit") is not None)]
+
+def _plot_presets(plt, results, stem: Path, batch: int):
+    rows = [r for r in results if r["kind"] in ("stori-jax", "naive gymnasium")
+            and r["B"] == batch and r.get("vs_limit") is not None]  # the per-preset runs
+    if not rows:
+        return
     labels = sorted({f"{r['game']} {r['preset']}" for r in rows},
                     key=lambda s: (s.split()[0], s.split()[1]))
     kinds = sorted({(r["kind"], r["backend"], r["obs"]) for r in rows})
@@ -423,11 +432,12 @@ def main(argv=None):
                 seconds=args.seconds, argv=sys.argv[1:])
     results = add_ratios(run(args))
     args.out.mkdir(parents=True, exist_ok=True)
-    stem = args.out / f"{meta['date']}-{meta['host']}"
+    subset = "".join(f"-{'-'.join(names)}" for names in (args.games, args.presets) if names)
+    stem = args.out / f"{meta['date']}-{meta['host']}{subset}"  # a subset never overwrites a run
     Path(f"{stem}.json").write_text(json.dumps(dict(meta=meta, results=results), indent=1))
     table = markdown(results, meta)
     Path(f"{stem}.md").write_text(table)
-    plots(results, stem)
+    plots(results, stem, args.batch)
     print(table)
     print(f"wrote {stem}.json, {stem}.md and PNG plots")
 

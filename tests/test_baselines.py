@@ -393,7 +393,8 @@ def test_cli_train_refuses_to_overwrite_and_evaluates(uninterrupted, tmp_path, c
         "--eval-seed)" in capsys.readouterr().err
 
 
-def test_cli_random_evaluation_spells_the_game_one_way(tmp_path, capsys):
+def test_cli_random_evaluation_spells_the_game_one_way_and_keeps_earlier_results(tmp_path,
+                                                                                  capsys):
     assert main(["eval", "--random", "--game", "breakout", "--preset", "3.1", "--episodes", "1",
                  "--num-envs", "1", "--out", str(tmp_path), "--quiet"]) == 0
     assert json.loads((tmp_path / "eval-random.json").read_text())["game"] == "Breakout"
@@ -406,7 +407,7 @@ def test_cli_random_evaluation_spells_the_game_one_way(tmp_path, capsys):
     assert main(again + ["--force"]) == 0
     assert json.loads((tmp_path / "eval-random.json").read_text())["episodes"] == 2
     assert main(["eval", "--random", "--game", "Breakout", "--preset", "3.1",
-                 "--seed", str(2**31 - 10000), "--quiet"]) == 2
+                 "--seed", str(2**31 - 10000), "--out", str(tmp_path / "other"), "--quiet"]) == 2
     assert "--seed + 10000 (the default --eval-seed) must be in [0, 2147483647]" \
         in capsys.readouterr().err
 

@@ -155,9 +155,17 @@ def test_truncation_comes_at_the_same_step_as_on_subproc():
         assert truncated == [False, True], backend
 
 
-@pytest.mark.parametrize("name, value", [("noop_max", 2**31), ("max_episode_frames", 2**40)])
+@pytest.mark.parametrize("name, value", [("noop_max", 2**31 - 1),  # envpool is given noop_max + 1
+                                         ("max_episode_frames", 2**31)])
 def test_int32_overflow_is_named_before_any_backend_starts(name, value):
     for backend in ("envpool", "subproc"):
         kw = EP if backend == "envpool" else {}
         with pytest.raises(ValueError, match=rf"{name} must be in \[\d+, 2147483\d+\]"):
             stori_jax.make("Breakout", num_envs=1, seed=0, **{name: value}, **kw)
+
+
+def test_a_game_envpool_lacks_is_named(monkeypatch):
+    monkeypatch.setattr(envpool, "list_all_envs", lambda: [])
+    with pytest.raises(ValueError, match="envpool has no Atari task 'Breakout-v5' for game "
+                                         "'Breakout'; use backend='subproc'"):
+        stori_jax.make("Breakout", num_envs=1, seed=0, **EP)
