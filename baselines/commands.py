@@ -132,8 +132,8 @@ def cmd_train(args) -> int:
 
 def cmd_eval(args) -> int:
     import stori_jax
-    from baselines.evaluate import EVAL_SEED_OFFSET, evaluate, write_result
-    from baselines.ppo import load_checkpoint, stori_game
+    from baselines.evaluate import EVAL_SEED_OFFSET, evaluate, stori_game, write_result
+    from baselines.ppo import load_checkpoint
     from stori_jax.checks import check_int
     from stori_jax.cli import check_out
     from stori_jax.env import MAX_SEED

@@ -25,6 +25,18 @@ EVAL_NUM_ENVS = 20  # envs of an evaluation (the recorded evaluations used this 
 STEPS_SHOWN_EVERY = 250  # the progress bar shows the agent steps played every this many steps
 
 
+def stori_game(name: str) -> str:
+    """``name`` spelt as the STORI game it names; other games are refused (the baselines train
+    and evaluate on the paper's presets)."""
+    import stori_jax
+
+    game = stori_jax.get_game(name).name  # unknown to ale-py: a clear ValueError
+    if game not in stori_jax.STORI_GAMES:
+        raise ValueError(f"game must be one of the STORI games {list(stori_jax.STORI_GAMES)} "
+                         f"(the baselines play the paper's presets), got {name!r}")
+    return game
+
+
 def episode_quotas(episodes: int, num_envs: int) -> np.ndarray:
     """How many episodes each env plays: ``episodes`` split as evenly as possible."""
     return np.array([episodes // num_envs + (i < episodes % num_envs) for i in range(num_envs)])
@@ -44,8 +56,6 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
         raise ValueError("give a checkpoint for the 'sampled' and 'greedy' policies, and none "
                          "for 'random'")
     episodes, num_envs = check_int("episodes", episodes, 1), check_int("num_envs", num_envs, 1)
-    from baselines.ppo import stori_game
-
     game = stori_game(game)  # one spelling per game in the results
     eval_seed = seed + EVAL_SEED_OFFSET if eval_seed is None else eval_seed
     num_envs = min(num_envs, episodes)

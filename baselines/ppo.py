@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from baselines.evaluate import CHECKPOINT_POLICIES
+from baselines.evaluate import CHECKPOINT_POLICIES, stori_game
 from stori_jax.checks import check_int, check_real
 
 NETWORKS = ("nature", "nips", "tiny")
@@ -154,18 +154,6 @@ class PPOConfig:
                     kind_name = {int: "an int", float: "a number"}.get(kind, kind.__name__)
                     raise ValueError(f"{name} must be {kind_name}, got {text!r}") from None
         return dataclasses.replace(base, **typed)
-
-
-def stori_game(name: str) -> str:
-    """``name`` spelt as the STORI game it names; other games are refused (the baselines train
-    and evaluate on the paper's presets)."""
-    import stori_jax
-
-    game = stori_jax.get_game(name).name  # unknown to ale-py: a clear ValueError
-    if game not in stori_jax.STORI_GAMES:
-        raise ValueError(f"game must be one of the STORI games {list(stori_jax.STORI_GAMES)} "
-                         f"(the baselines play the paper's presets), got {name!r}")
-    return game
 
 
 # -- network --------------------------------------------------------------------------------------

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from baselines.evaluate import CHECKPOINT_POLICIES
+from baselines.evaluate import CHECKPOINT_POLICIES, stori_game
 from stori_jax.checks import check_int, check_real
 
 # STORI_SPEC section 11: mean evaluation return ± std over seeds 0, 7, 13 at 100k agent steps
@@ -80,6 +80,12 @@ def _check_evaluation(path: Path, result: dict) -> None:
     check_int(f"{path}: train_seed", result["train_seed"], 0)
     check_int(f"{path}: episodes", result["episodes"], 1)
     check_real(f"{path}: mean_return", result["mean_return"])
+    import stori_jax
+
+    try:
+        stori_jax.preset(result["game"], result["preset"])
+    except ValueError as e:
+        raise ValueError(f"{path}: {e}") from None
 
 
 def load_evaluations(results_dir: Path) -> list[dict]:
@@ -92,7 +98,8 @@ def load_evaluations(results_dir: Path) -> list[dict]:
     for path in sorted(results_dir.rglob("eval-*.json")):
         result = _read_json_object(path, "a stori-jax evaluation")
         _check_evaluation(path, result)
-        found.append(dict(result, path=str(path)))
+        # one spelling per game, so that files written as 'breakout' join the Breakout row
+        found.append(dict(result, game=stori_game(result["game"]), path=str(path)))
     if not found:
         raise ValueError(f"no eval-*.json under {results_dir}: run `stori-jax eval` first")
     return found
@@ -104,6 +111,11 @@ def aggregate(evaluations: list[dict], ppo_policy: str = "sampled") -> list[dict
     if ppo_policy not in CHECKPOINT_POLICIES:
         raise ValueError(f"ppo_policy must be one of {list(CHECKPOINT_POLICIES)}, "
                          f"got {ppo_policy!r}")
+    policies = {e["policy"] for e in evaluations if e["agent"] == "ppo"}
+    if policies and ppo_policy not in policies:
+        raise ValueError(f"no PPO evaluation with policy {ppo_policy!r}: the PPO evaluations "
+                         f"here are {sorted(policies)} (stori-jax eval --policy {ppo_policy} "
+                         "writes one)")
     per_cell = defaultdict(lambda: defaultdict(dict))
     for e in evaluations:
         column = "Random" if e["agent"] == "random" else (
@@ -153,6 +165,8 @@ def markdown(rows: list[dict]) -> str:
              "seeds (PPO) | episodes per seed |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         seeds = ", ".join(str(s) for s in r["PPO"]["seeds"]) or "-"
+        if r["Random"]["seeds"] and r["Random"]["seeds"] != r["PPO"]["seeds"]:
+            seeds += "; Random: " + ", ".join(str(s) for s in r["Random"]["seeds"])
         episodes = sorted(set(r["PPO"]["episodes"] + r["Random"]["episodes"]))
         lines.append(f"| {r['game']} | {r['preset']} | {_cell(r['PPO'])} | {_cell(r['Random'])}"
                      f" | {_cell(r['DreamerV3'])} | {_cell(r['STORM'])} | {seeds} | "

@@ -21,6 +21,7 @@ import numpy as np
 
 import stori_jax
 from baselines import ppo
+from baselines.evaluate import stori_game
 from baselines.run_evidence import EVIDENCE_HYPERPARAMETERS, GAME_HYPERPARAMETERS
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -122,7 +123,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=RESULTS, help="directory for the results")
     args = parser.parse_args()
     try:
-        game = ppo.stori_game(args.game)
+        game = stori_game(args.game)
     except ValueError as e:
         parser.error(f"--game: {e}")
     config = ppo.PPOConfig(game=game, preset=args.preset,

@@ -15,7 +15,8 @@ import pytest
 import stori_jax
 from baselines import ppo
 from baselines.evaluate import episode_quotas, evaluate, write_result
-from baselines.table import PAPER_RESULTS, aggregate, build_table, load_evaluations, smoothed
+from baselines.table import (PAPER_RESULTS, aggregate, build_table, load_evaluations, markdown,
+                             smoothed)
 from stori_jax.cli import main
 
 TINY = dict(game="Breakout", preset="1", network="tiny", num_envs=4, num_steps=16,
@@ -330,10 +331,26 @@ def test_table_errors(tmp_path):
     fake_eval(tmp_path / "copy", "Breakout", "3.1", "ppo", 0, 2.0)
     with pytest.raises(ValueError, match="two PPO evaluations"):
         aggregate(load_evaluations(tmp_path))
+    with pytest.raises(ValueError, match=r"no PPO evaluation with policy 'greedy': the PPO "
+                                         r"evaluations here are \['sampled'\]"):
+        aggregate(load_evaluations(tmp_path), ppo_policy="greedy")
     (tmp_path / "bad").mkdir()
     (tmp_path / "bad" / "eval-x.json").write_text("{}")
     with pytest.raises(ValueError, match="lacks"):
         load_evaluations(tmp_path)
+    fake_eval(tmp_path / "pong", "Pong", "zzz", "random", 0, 1.0)
+    with pytest.raises(ValueError, match="pong/Pong-zzz/random-seed0/eval-random.json: unknown "
+                                         "game 'Pong' for presets"):
+        load_evaluations(tmp_path / "pong")
+
+
+def test_table_joins_spellings_and_names_differing_seed_sets(tmp_path):
+    fake_eval(tmp_path, "Breakout", "3.1", "ppo", 0, 1.0)
+    fake_eval(tmp_path, "breakout", "3.1", "random", 0, 2.0)
+    fake_eval(tmp_path, "Breakout", "3.1", "random", 7, 3.0)
+    text = markdown(aggregate(load_evaluations(tmp_path)))
+    assert text.splitlines()[2] == ("| Breakout | 3.1 | 1.00 (1 seed) | 2.50 ± 0.71 | 60.71 ± 41.89 "
+                                    "| 24.17 ± 3.55 | 0; Random: 0, 7 | 100 |")
 
 
 def test_smoothing_is_the_mean_of_the_latest_episodes():
