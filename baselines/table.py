@@ -63,6 +63,7 @@ def _read_json_object(path: Path, what: str) -> dict:
 
 def _check_evaluation(path: Path, result: dict) -> None:
     """A clear ValueError if ``result`` is not what ``stori-jax eval`` writes."""
+    import stori_jax
     from baselines.evaluate import POLICIES
 
     missing = [k for k in EVAL_KEYS if k not in result]
@@ -80,8 +81,6 @@ def _check_evaluation(path: Path, result: dict) -> None:
     check_int(f"{path}: train_seed", result["train_seed"], 0)
     check_int(f"{path}: episodes", result["episodes"], 1)
     check_real(f"{path}: mean_return", result["mean_return"])
-    import stori_jax
-
     try:
         stori_jax.preset(result["game"], result["preset"])
     except ValueError as e:
@@ -164,9 +163,11 @@ def markdown(rows: list[dict]) -> str:
     lines = ["| game | preset | PPO (ours) | Random (ours) | DreamerV3 (paper) | STORM (paper) | "
              "seeds (PPO) | episodes per seed |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        seeds = ", ".join(str(s) for s in r["PPO"]["seeds"]) or "-"
+        seeds = ", ".join(str(s) for s in r["PPO"]["seeds"])
         if r["Random"]["seeds"] and r["Random"]["seeds"] != r["PPO"]["seeds"]:
-            seeds += "; Random: " + ", ".join(str(s) for s in r["Random"]["seeds"])
+            seeds += ("; " if seeds else "") + "Random: " + ", ".join(
+                str(s) for s in r["Random"]["seeds"])
+        seeds = seeds or "-"
         episodes = sorted(set(r["PPO"]["episodes"] + r["Random"]["episodes"]))
         lines.append(f"| {r['game']} | {r['preset']} | {_cell(r['PPO'])} | {_cell(r['Random'])}"
                      f" | {_cell(r['DreamerV3'])} | {_cell(r['STORM'])} | {seeds} | "

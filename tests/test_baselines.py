@@ -351,6 +351,9 @@ def test_table_joins_spellings_and_names_differing_seed_sets(tmp_path):
     text = markdown(aggregate(load_evaluations(tmp_path)))
     assert text.splitlines()[2] == ("| Breakout | 3.1 | 1.00 (1 seed) | 2.50 ± 0.71 | 60.71 ± 41.89 "
                                     "| 24.17 ± 3.55 | 0; Random: 0, 7 | 100 |")
+    fake_eval(tmp_path, "Boxing", "1", "random", 13, 0.5)
+    text = markdown(aggregate(load_evaluations(tmp_path)))
+    assert text.splitlines()[3].endswith("| Random: 13 | 100 |")
 
 
 def test_smoothing_is_the_mean_of_the_latest_episodes():
