@@ -110,6 +110,11 @@ def emulator_limit(game, batch, workers, seconds):
 WARMUP = 20  # agent steps before timing
 
 
+def warmup_steps(config, default: int = WARMUP) -> int:
+    """Agent steps before timing: a 2.2 preset's T, so that the timed steps start in concept 2."""
+    return config.drift.period if config.drift else default
+
+
 def _timed_loop(step, num_envs, num_actions, seconds, warmup=WARMUP):
     rng = np.random.default_rng(0)
     actions = rng.integers(0, num_actions, (256, num_envs)).astype(np.int32)
@@ -167,7 +172,7 @@ def naive(game, preset, batch, seconds):
     env = make_naive_vector_env(game, config, batch, seed=0)
     env.reset(seed=0)
     rate = _timed_loop(lambda a: env.step(a), batch, stori_jax.get_game(game).num_actions,
-                       seconds, warmup=config.drift.period if config.drift else 5)
+                       seconds, warmup=warmup_steps(config, default=5))
     env.close()
     return rate
 
@@ -188,7 +193,7 @@ def stori(game, preset, batch, seconds, obs, backend):
     def step(actions):
         concepts.append(env.step(actions)[-1]["concept"])
 
-    warmup = env.config.drift.period if env.config.drift else WARMUP  # 2.2: to concept 2
+    warmup = warmup_steps(env.config)
     rate = _timed_loop(step, batch, env.num_actions, seconds, warmup=warmup)
     env.close()
     concept2 = float(np.mean(np.stack(concepts[warmup:]))) if env.config.drift else None

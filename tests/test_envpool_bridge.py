@@ -4,10 +4,16 @@ import numpy as np
 import pytest
 
 import stori_jax
+from _env_support import new_ale
 
 envpool = pytest.importorskip("envpool")
 
 EP = dict(backend="envpool", autoreset=False, granularity="step")
+
+
+def on(backend):
+    """make()'s keywords for ``backend`` with what the envpool backend needs, on both."""
+    return EP if backend == "envpool" else dict(autoreset=False, granularity="step")
 
 
 def run(game, preset, steps=40, seed=0, obs="raw", **kwargs):
@@ -114,12 +120,7 @@ def test_a_timeout_is_refused_before_anything_is_sent():
 
 def _noop_frames_played(rams):
     """For each env's reset RAM, how many NOOP frames a bare ale-py Breakout played to reach it."""
-    from ale_py import ALEInterface, LoggerMode, roms
-
-    ALEInterface.setLoggerMode(LoggerMode.Error)
-    ale = ALEInterface()
-    ale.setFloat("repeat_action_probability", 0.0)
-    ale.loadROM(roms.get_rom_path("breakout"))
+    ale = new_ale("breakout")
     ale.reset_game()
     reference = []
     for _ in range(8):
@@ -134,9 +135,8 @@ def _noop_frames_played(rams):
 ])
 def test_noop_starts_play_the_documented_number_of_frames(backend, noop_max, starts):
     cfg = stori_jax.Config(ram_observation=True)
-    kw = EP if backend == "envpool" else dict(autoreset=False, granularity="step")
     with stori_jax.make("Breakout", config=cfg, num_envs=16, seed=0, noop_max=noop_max,
-                        **kw) as env:
+                        **on(backend)) as env:
         obs, _ = env.reset()
         played = _noop_frames_played(np.asarray(obs))
     assert all(len(p) == 1 for p in played), played  # each start is one known frame
@@ -147,9 +147,8 @@ def test_noop_starts_play_the_documented_number_of_frames(backend, noop_max, sta
 def test_truncation_comes_at_the_same_step_as_on_subproc():
     """max_episode_frames 6 at frame skip 4: the second step (frames 5-8) reaches it."""
     for backend in ("envpool", "subproc"):
-        kw = EP if backend == "envpool" else dict(autoreset=False, granularity="step")
         with stori_jax.make("Breakout", num_envs=1, seed=0, obs="ram", max_episode_frames=6,
-                            **kw) as env:
+                            **on(backend)) as env:
             env.reset()
             truncated = [bool(env.step(np.zeros(1, np.int32))[3][0]) for _ in range(2)]
         assert truncated == [False, True], backend
@@ -159,9 +158,8 @@ def test_truncation_comes_at_the_same_step_as_on_subproc():
                                          ("max_episode_frames", 2**31)])
 def test_int32_overflow_is_named_before_any_backend_starts(name, value):
     for backend in ("envpool", "subproc"):
-        kw = EP if backend == "envpool" else {}
         with pytest.raises(ValueError, match=rf"{name} must be in \[\d+, 2147483\d+\]"):
-            stori_jax.make("Breakout", num_envs=1, seed=0, **{name: value}, **kw)
+            stori_jax.make("Breakout", num_envs=1, seed=0, **{name: value}, **on(backend))
 
 
 def test_a_game_envpool_lacks_is_named(monkeypatch):
