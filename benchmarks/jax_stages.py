@@ -22,6 +22,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from _checks import require_at_least_one  # this folder is on sys.path when run as a script
+
 HERE = Path(__file__).resolve().parent
 
 
@@ -37,7 +39,8 @@ def timed(fn, *args, repeats=30):
     return float(np.median(best))
 
 
-def stages(b: int) -> dict[str, float]:
+def stages(b: int) -> dict:
+    """Each stage's name and a thunk that times it (ms per call) at batch size ``b``."""
     import stori_jax
     from stori_jax import functional as F
     from stori_jax.core import before_step, initial_state
@@ -71,16 +74,33 @@ def stages(b: int) -> dict[str, float]:
     state = initial_state(plan, 0)
     actions = jnp.zeros(b, jnp.int32)
     return {
-        "copy two screens into JAX": timed(lambda h: jnp.asarray(h), host),
-        "blackout mask (per frame)": timed(jax.jit(blackout), keys, pair),
-        "torch mask (per frame)": timed(jax.jit(torch), keys, pair),
-        "max-pool": timed(jax.jit(F.max_pool), pair),
-        "luma + area resize 84x84": timed(jax.jit(F.atari84_frame), screen),
-        "frame stack": timed(jax.jit(F.push_frame), stack, frame84, new_episode),
-        "mask + max-pool + atari84": timed(jax.jit(mask_pool_atari84), keys, pair),
-        "before_step draws (type 1)": timed(lambda s, a: before_step(plan, s, a), state,
-                                            actions),
+        "copy two screens into JAX": lambda: timed(lambda h: jnp.asarray(h), host),
+        "blackout mask (per frame)": lambda: timed(jax.jit(blackout), keys, pair),
+        "torch mask (per frame)": lambda: timed(jax.jit(torch), keys, pair),
+        "max-pool": lambda: timed(jax.jit(F.max_pool), pair),
+        "luma + area resize 84x84": lambda: timed(jax.jit(F.atari84_frame), screen),
+        "frame stack": lambda: timed(jax.jit(F.push_frame), stack, frame84, new_episode),
+        "mask + max-pool + atari84": lambda: timed(jax.jit(mask_pool_atari84), keys, pair),
+        "before_step draws (type 1)": lambda: timed(lambda s, a: before_step(plan, s, a),
+                                                    state, actions),
     }
+
+
+def measure(sizes: list[int]) -> dict[int, dict[str, float]]:
+    """Every stage at every batch size, with a progress bar over the (size, stage) pairs."""
+    from tqdm import tqdm
+
+    results = {}
+    with tqdm(desc="JAX stages", unit="stage") as bar:
+        for b in sizes:
+            results[b] = {}
+            runs = stages(b)
+            bar.total = len(sizes) * len(runs)
+            for name, run in runs.items():
+                bar.set_postfix_str(f"B={b} {name}")
+                results[b][name] = run()
+                bar.update()
+    return results
 
 
 def main(argv=None):
@@ -89,8 +109,9 @@ def main(argv=None):
     parser.add_argument("--sizes", type=int, nargs="+", default=[32])
     parser.add_argument("--out", type=Path, default=HERE / "results")
     args = parser.parse_args(argv)
+    require_at_least_one(parser, sizes=args.sizes)
     device = str(jax.devices()[0])
-    results = {b: stages(b) for b in args.sizes}
+    results = measure(args.sizes)
     meta = dict(date=datetime.date.today().isoformat(), host=socket.gethostname(),
                 device=device, jax=jax.__version__)
     lines = [f"# JAX-side cost per step (ms), {meta['date']} on {meta['host']} ({device})", "",

@@ -21,8 +21,8 @@ import numpy as np
 
 import stori_jax
 from baselines import ppo
-from baselines.evaluate import stori_game
 from baselines.run_evidence import EVIDENCE_HYPERPARAMETERS, GAME_HYPERPARAMETERS
+from _checks import require_at_least_one, stori_game_and_preset  # this folder is on sys.path
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -46,9 +46,22 @@ def median_rate(fn, steps: int, repeats: int) -> float:
 
 
 def measure(config: ppo.PPOConfig, repeats: int) -> dict:
+    from tqdm import tqdm
+
+    with tqdm(total=4, desc="PPO stages", unit="stage") as bar:  # the four `done` calls
+        return measure_stages(config, repeats, bar)
+
+
+def measure_stages(config: ppo.PPOConfig, repeats: int, bar) -> dict:
     steps = config.batch_size
+
+    def done(stage: str) -> None:
+        bar.set_postfix_str(f"measured {stage}")
+        bar.update()
+
     results = dict(env_only=float(np.median([ppo.env_only_sps(config, steps)
                                              for _ in range(repeats)])))
+    done("env only")
     envs = ppo.make_envs(config)
     try:
         network = ppo.make_network(config, envs[0].num_actions)
@@ -68,6 +81,7 @@ def measure(config: ppo.PPOConfig, repeats: int) -> dict:
 
         overlapped()  # compile
         results["rollout_overlapped"] = median_rate(overlapped, steps, repeats)
+        done("overlapped rollout")
 
         def one_update():
             out = update(params, opt_state, state["rollout"], jax.numpy.concatenate(
@@ -76,6 +90,7 @@ def measure(config: ppo.PPOConfig, repeats: int) -> dict:
 
         one_update()  # compile
         results["update_per_s"] = median_rate(one_update, steps, repeats)
+        done("update")
     finally:
         for env in envs:
             env.close()
@@ -88,6 +103,7 @@ def measure(config: ppo.PPOConfig, repeats: int) -> dict:
 
         run()
         results["rollout_sequential"] = median_rate(run, steps, repeats)
+        done("sequential rollout")
     rollout_s = steps / results["rollout_overlapped"]
     update_s = steps / results["update_per_s"]
     results["training_sps_model"] = steps / (rollout_s + update_s)
@@ -114,18 +130,16 @@ def markdown(config: ppo.PPOConfig, r: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main() -> None:
+def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--game", default="Breakout")
     parser.add_argument("--preset", default="3.1")
     parser.add_argument("--network", default="nips", choices=list(ppo.NETWORKS))
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--out", type=Path, default=RESULTS, help="directory for the results")
-    args = parser.parse_args()
-    try:
-        game = stori_game(args.game)
-    except ValueError as e:
-        parser.error(f"--game: {e}")
+    args = parser.parse_args(argv)
+    require_at_least_one(parser, repeats=args.repeats)
+    game = stori_game_and_preset(parser, args.game, args.preset)
     config = ppo.PPOConfig(game=game, preset=args.preset,
                            **{**GAME_HYPERPARAMETERS.get(game, EVIDENCE_HYPERPARAMETERS),
                               "network": args.network})

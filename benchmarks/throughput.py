@@ -39,6 +39,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+from _checks import require_at_least_one  # noqa: E402  (needs this folder on sys.path)
 
 FRAME_SKIP = 4
 WINDOWS = 3  # each rate is the median over this many equal windows (the machine is noisy)
@@ -399,11 +400,7 @@ def _check_arguments(parser, args):
 
     if not args.seconds > 0:
         parser.error(f"--seconds must be > 0, got {args.seconds}")
-    for name in ("batch", "workers"):
-        if getattr(args, name) < 1:
-            parser.error(f"--{name} must be >= 1, got {getattr(args, name)}")
-    if args.sizes is not None and min(args.sizes) < 1:
-        parser.error(f"--sizes must all be >= 1, got {args.sizes}")
+    require_at_least_one(parser, batch=args.batch, workers=args.workers, sizes=args.sizes)
     for game in args.games or ():
         if game not in stori_jax.STORI_GAMES:
             parser.error(f"--games: {game!r} is not one of {list(stori_jax.STORI_GAMES)}")

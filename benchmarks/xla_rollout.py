@@ -22,7 +22,8 @@ from tqdm import tqdm
 
 import stori_jax
 from baselines import ppo
-from ppo_rollout import median_rate, plot  # this folder is on sys.path when run as a script
+from _checks import require_at_least_one, stori_game_and_preset  # this folder is on sys.path
+from ppo_rollout import median_rate, plot
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -79,7 +80,7 @@ def markdown(game: str, preset: str, steps: int, rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main() -> None:
+def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--game", default="Breakout")
     parser.add_argument("--preset", default="3.1")
@@ -87,7 +88,9 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=128)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--out", type=Path, default=RESULTS, help="directory for the results")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
+    require_at_least_one(parser, sizes=args.sizes, steps=args.steps, repeats=args.repeats)
+    args.game = stori_game_and_preset(parser, args.game, args.preset)
     rows = [measure(args.game, args.preset, b, args.steps, args.repeats)
             for b in tqdm(args.sizes, desc="batch sizes")]
     text = markdown(args.game, args.preset, args.steps, rows)

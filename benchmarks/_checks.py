@@ -1,0 +1,28 @@
+"""Argument checks shared by the benchmark scripts: a bad value is a one-line usage error that
+names the option, never a traceback from inside a measurement."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def require_at_least_one(parser: argparse.ArgumentParser, **options) -> None:
+    """Every count in ``options`` (an int or a list of ints, keyed by the option's name without
+    dashes) is >= 1."""
+    for name, value in options.items():
+        values = value if isinstance(value, list) else [value]
+        if value is not None and min(values) < 1:
+            parser.error(f"--{name.replace('_', '-')}: must be >= 1, got {value}")
+
+
+def stori_game_and_preset(parser: argparse.ArgumentParser, game: str, preset: str) -> str:
+    """The STORI game ``game`` names, spelt canonically, after checking it has ``preset``."""
+    import stori_jax
+    from baselines.evaluate import stori_game
+
+    try:
+        game = stori_game(game)
+        stori_jax.preset(game, preset)
+    except ValueError as error:
+        parser.error(str(error))
+    return game

@@ -1,0 +1,36 @@
+"""The benchmark scripts refuse bad arguments with a usage error naming the option, before
+measuring anything (a bad preset used to surface as a traceback after the emulators started)."""
+
+import importlib
+from pathlib import Path
+
+import pytest
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+def script(monkeypatch, name: str):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    return importlib.import_module(name)
+
+
+@pytest.mark.parametrize("name, argv, message", [
+    ("throughput", ["--batch", "0"], "--batch: must be >= 1, got 0"),
+    ("throughput", ["--sizes", "8", "-1"], "--sizes: must be >= 1, got [8, -1]"),
+    ("throughput", ["--workers", "0"], "--workers: must be >= 1"),
+    ("throughput", ["--presets", "9.9"], "--presets: '9.9' is not one of"),
+    ("jax_stages", ["--sizes", "0"], "--sizes: must be >= 1, got [0]"),
+    ("ppo_rollout", ["--repeats", "0"], "--repeats: must be >= 1, got 0"),
+    ("ppo_rollout", ["--preset", "2"], "unknown preset '2' for Breakout: allowed ['1', '2.1'"),
+    ("xla_rollout", ["--steps", "0"], "--steps: must be >= 1, got 0"),
+    ("xla_rollout", ["--game", "Pong"], "game must be one of the STORI games"),
+    ("xla_rollout", ["--game", "boxing", "--preset", "3.3"],
+     "unknown preset '3.3' for Boxing: allowed"),
+])
+def test_bad_arguments_are_usage_errors_naming_the_option(monkeypatch, capsys, tmp_path,
+                                                          name, argv, message):
+    with pytest.raises(SystemExit) as exit_info:
+        script(monkeypatch, name).main(argv + ["--out", str(tmp_path)])
+    assert exit_info.value.code == 2
+    assert message in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())  # refused before measuring or writing anything
