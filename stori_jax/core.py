@@ -109,7 +109,7 @@ def before_step(plan: Plan, state: EnvState, actions: jax.Array, resetting: bool
             ram_render = bits.astype(jnp.uint8)
 
     if plan.noop_max > 0:
-        noops = jax.vmap(lambda k: jax.random.randint(k, (), 0, plan.noop_max + 1))(
+        noops = jax.vmap(lambda k: jax.random.randint(k, (), 0, plan.noop_max + 1, jnp.int32))(
             F.purpose_keys(keys, F.Purpose.NOOPS))
     else:
         noops = jnp.zeros((b,), jnp.int32)

@@ -101,3 +101,46 @@ def test_envs_of_a_batch_are_independent_of_the_batch_size(name):
     for key in ("obs", "reward", "terminated", "executed_action", "event_fired", "obs_masked"):
         np.testing.assert_array_equal(four.stacked(key)[:, :2], two.stacked(key), err_msg=key)
     np.testing.assert_array_equal(four.ram[:, :2], two.ram)
+
+
+def draws_digest() -> str:
+    """sha256 of short runs whose every draw kind is on: type-1 replacement per frame with
+    no-op starts, torch centres, gradual drift over sticky actions (obs, rewards and infos)."""
+    import hashlib
+
+    from stori_jax import ConceptDrift
+
+    cases = [
+        dict(game="Breakout", preset="1", obs="atari84", noop_max=30, max_episode_frames=40),
+        dict(game="Breakout", obs="raw", config=Config(observation=ObservationMask("crop", 5, 0.5))),
+        dict(game="Boxing", config=Config(drift=ConceptDrift("gradual", 2, Config(
+            action_noise=ActionNoise(0.5, sticky=True))))),
+    ]
+    digest = hashlib.sha256()
+    for case in cases:
+        game = case.pop("game")
+        with make(game, seed=3, **case) as env:
+            run = run_env(env, random_actions(env.num_actions, 8, 2, seed=1))
+        for name in ("obs", "reward", "executed_action", "action_corrupted", "obs_masked",
+                     "concept"):
+            values = run.stacked(name)
+            digest.update(f"{name} {values.dtype}".encode() + values.tobytes())
+    return digest.hexdigest()
+
+
+def test_a_seed_gives_the_same_run_with_jax_x64_enabled():
+    """Research code often turns on ``jax_enable_x64``: the environment's draws must not change
+    with it (they did: uniform/randint without a dtype draw 64-bit numbers then)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    tests = Path(__file__).resolve().parent
+    code = ("import sys; sys.path.insert(0, sys.argv[1]); import jax; "
+            "assert jax.config.jax_enable_x64; "
+            "from test_env_repro import draws_digest; print(draws_digest())")
+    x64 = subprocess.run([sys.executable, "-c", code, str(tests)], capture_output=True,
+                         text=True, env={**os.environ, "JAX_ENABLE_X64": "1"}, timeout=300)
+    assert x64.returncode == 0, x64.stderr[-2000:]
+    assert x64.stdout.split()[-1] == draws_digest()

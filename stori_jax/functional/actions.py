@@ -29,7 +29,7 @@ def corrupt_actions(keys: jax.Array, actions: jax.Array, prev_executed: jax.Arra
 
     def one_env(key, action, prev):
         k_fire, k_choice = jax.random.split(key)
-        fire = jax.random.uniform(k_fire, (num_slots,)) < prob
+        fire = jax.random.uniform(k_fire, (num_slots,), jnp.float32) < prob
         if sticky:
             # executed[f] = executed[f-1] if fire[f] else action  => repeats `prev` only while
             # every slot so far fired, afterwards it repeats `action` itself.
@@ -37,7 +37,8 @@ def corrupt_actions(keys: jax.Array, actions: jax.Array, prev_executed: jax.Arra
             executed = jnp.where(stuck, prev, action)
         else:
             table = jnp.asarray(replacement, jnp.int32)
-            choice = table[jax.random.randint(k_choice, (num_slots,), 0, table.shape[0])]
+            choice = table[jax.random.randint(k_choice, (num_slots,), 0, table.shape[0],
+                                                jnp.int32)]
             executed = jnp.where(fire, choice, action)
         return executed, fire
 

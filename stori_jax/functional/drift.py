@@ -24,6 +24,6 @@ def concept_of(keys: jax.Array, episode_step: jax.Array, schedule: str, period: 
     """(B,) int32 concept index (0 = concept 1 default, 1 = concept 2) for this step."""
     p2 = concept2_probability(episode_step, schedule, period)
     if schedule == "gradual":
-        u = jax.vmap(lambda k: jax.random.uniform(k))(keys)
+        u = jax.vmap(lambda k: jax.random.uniform(k, (), jnp.float32))(keys)
         return (u < p2).astype(jnp.int32)
     return p2.astype(jnp.int32)

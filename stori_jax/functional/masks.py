@@ -39,9 +39,9 @@ def draw_mask_decisions(keys: jax.Array, *, prob: float, per_frame: bool, torch:
 
     def one_env(key):
         k_apply, k_x, k_y = jax.random.split(key, 3)
-        apply = jax.random.uniform(k_apply, (n,)) < prob
-        cx = jax.random.randint(k_x, (n,), 0, SCREEN_WIDTH)
-        cy = jax.random.randint(k_y, (n,), 0, SCREEN_HEIGHT)
+        apply = jax.random.uniform(k_apply, (n,), jnp.float32) < prob
+        cx = jax.random.randint(k_x, (n,), 0, SCREEN_WIDTH, jnp.int32)
+        cy = jax.random.randint(k_y, (n,), 0, SCREEN_HEIGHT, jnp.int32)
         centres = jnp.stack([cx, cy], axis=-1)
         if n == 1:
             apply, centres = jnp.repeat(apply, 2, 0), jnp.repeat(centres, 2, 0)
