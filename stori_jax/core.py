@@ -128,6 +128,8 @@ class WorkerOutputs(NamedTuple):
     frames: object        # see Plan.frames_layout
     ram: object           # (B, 128) uint8
     ram_rendered: object  # (B,) uint8
+    single_frame: object  # (B,) uint8: both screens are one emulator frame (a reset, frame
+    #                       skip 1, or an episode that ended before the step's last frame)
     reward: object        # (B,) float32
     terminated: object    # (B,) uint8
     truncated: object     # (B,) uint8
@@ -156,10 +158,11 @@ def after_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, ne
         # a pooled screen gets one decision per step (the backend pools only when that is exact)
         slots = ([frames[0], frames[1]] if pair else [F.pool_screens(frames, plan.frames_layout)])
         masked_slots = []
+        # one emulator frame in both slots of a pair (the first obs of an episode, frame_skip
+        # 1, an early end) gets one decision (and one torch centre), slot 1's, like any frame
+        single = new_episode | (out.single_frame != 0)
         for j, screen in enumerate(slots):
-            # the first obs of an episode is one emulator frame (in both slots of a pair): it
-            # gets one decision (and one torch centre), slot 1's, like any other frame
-            k = jnp.where(new_episode & pair, 1, j)  # a pooled screen: slot 0's, always
+            k = jnp.where(single & pair, 1, j)  # a pooled screen: slot 0's, always
             apply = jnp.take_along_axis(draws.mask_apply, k[:, None], 1) & gate[:, None]
             if m.torch:
                 centres = jnp.take_along_axis(draws.mask_centres, k[:, None, None], 1)
@@ -184,11 +187,14 @@ def after_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, ne
     else:
         obs = out.ram + jnp.uint8(0)
     slots_out = (lambda x: x) if plan.per_frame else (lambda x: x[:, 0])
+    # an env reset instead of stepped played no-ops (NOOP), not this step's drawn actions, and
+    # its first observation is seen under concept 1
+    stepped = ~jnp.asarray(reset_step, bool)
     info = {
-        "executed_action": slots_out(draws.executed_slots),
-        "action_corrupted": slots_out(draws.corrupted),
+        "executed_action": slots_out(jnp.where(stepped[:, None], draws.executed_slots, 0)),
+        "action_corrupted": slots_out(draws.corrupted & stepped[:, None]),
         "event_fired": out.event_fired + 0,
-        "concept": draws.concept + 0,
+        "concept": jnp.where(stepped, draws.concept, 0),
         "obs_masked": masked,
         "lives": out.lives + 0,
         "ram": out.ram + jnp.uint8(0),

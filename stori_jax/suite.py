@@ -15,8 +15,10 @@ import numpy as np
 def random_policy(num_actions: int):
     """policy(obs, key) -> (B,) uniformly random actions."""
     import jax
+    import jax.numpy as jnp
 
-    return jax.jit(lambda obs, key: jax.random.randint(key, (obs.shape[0],), 0, num_actions))
+    return jax.jit(lambda obs, key: jax.random.randint(key, (obs.shape[0],), 0, num_actions,
+                                                       jnp.int32))
 
 
 def play(env, obs, seed: int, *, max_steps: int, episodes: int | None = None,

@@ -6,6 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from stori_jax import ActionNoise, ConceptDrift, Config, RandomEvent
+
 from _env_support import NOOP, make, random_actions, run_env
 
 
@@ -86,3 +88,45 @@ def test_without_autoreset_the_step_after_the_end_resets():
     np.testing.assert_array_equal(ram[10], run.reset_info["ram"])
     assert not run.stacked("reward")[10].any()
     np.testing.assert_array_equal(ram[11], ram[0])
+
+
+@pytest.mark.parametrize("inline_envs", [0, 1])
+def test_reset_reports_no_outcome_of_the_step_before(inline_envs):
+    """``reset()`` after an episode end (and mid-episode) gives zero reward, events and
+    episode totals: it carried the last step's event count and the ended episode's length and
+    return, so a logger reading them counted the episode twice (worker and inline envs)."""
+    env = make("BankHeist", Config(event=RandomEvent(3, 1.0)), max_episode_frames=40,
+               inline_envs=inline_envs)
+    try:
+        env.reset()
+        for _ in range(10):
+            *_, truncated, info = env.step(np.zeros(2, np.int32))
+        assert truncated.all() and (info["event_fired"] > 0).all()
+        assert (info["episode_length"] == 10).all()
+        for _ in range(2):  # after the end, and mid-episode
+            _, info = env.reset()
+            for name in ("event_fired", "episode_length", "episode_return"):
+                assert not np.asarray(info[name]).any(), name
+            env.step(np.zeros(2, np.int32))
+    finally:
+        env.close()
+
+
+def test_a_reset_step_reports_no_drawn_action_and_concept_1():
+    """autoreset=False under sudden drift (T = 3) to type 1 at p = 1: the env reset instead of
+    stepped reports executed NOOPs, no corruption and concept 1 (it reported the ended
+    episode's concept 2 and corrupted actions that were never executed), as reset() does."""
+    config = Config(drift=ConceptDrift("sudden", 3, Config(action_noise=ActionNoise(1.0))))
+    env = make("Breakout", config, max_episode_frames=24, autoreset=False, num_envs=2)
+    try:
+        run = run_env(env, np.full((8, 2), 1, np.int32))
+    finally:
+        env.close()
+    reset_step = run.stacked("reset_step")[:, 0]
+    np.testing.assert_array_equal(reset_step, np.arange(8) == 6)  # ended at step 6 (24 frames)
+    concept, corrupted = run.stacked("concept"), run.stacked("action_corrupted")
+    np.testing.assert_array_equal(concept[:, 0], [0, 0, 0, 1, 1, 1, 0, 0])
+    assert corrupted[3:6].all() and not corrupted[6].any() and not corrupted[:3].any()
+    assert not run.stacked("executed_action")[6].any()
+    for info in (run.reset_info, run.info[6]):
+        assert not info["concept"].any() and not info["action_corrupted"].any()

@@ -394,6 +394,58 @@ def test_mask_at_frame_granularity_applies_to_each_pooled_screen_with_probabilit
     assert not binomial_ok(int(masked.sum()), masked.size, p), "one draw per step would be p"
 
 
+def test_at_frame_skip_1_an_observation_gets_one_mask_decision():
+    """frame_skip 1: each observation is one emulator frame, masked with probability p (the
+    spec's per-frame rate) and wholly when masked. (Two decisions on the one frame in both
+    slots masked a black crop only when both fired, p^2, and flagged 1 - (1 - p)^2.)"""
+    p, steps = 0.5, 50
+    env = make("Breakout", Config(observation=ObservationMask("crop", 1, p)), obs="raw",
+               num_envs=4, frame_skip=1)
+    try:
+        run = run_env(env, random_actions(4, steps, 4, seed=2))
+    finally:
+        env.close()
+    obs, masked = all_obs(run), all_masked(run)
+    left_black = (obs[..., :, :80, :] == 0).all(axis=(-3, -2, -1))
+    np.testing.assert_array_equal(left_black, masked)
+    assert binomial_ok(int(masked.sum()), masked.size, p)
+    assert not binomial_ok(int(masked.sum()), masked.size, 1 - (1 - p) ** 2)
+
+
+@pytest.mark.parametrize("end_frame", [41, 43, 44])
+def test_without_autoreset_an_episode_that_ends_mid_step_shows_its_last_frame(end_frame):
+    """autoreset=False and an episode truncated at frame 41, 43 or 44 (frames 1, 3 and 4 of the
+    11th step): the final observation is the screen of the episode's last frame (beside a bare
+    emulator), max-pooled with the frame before it only where the step played both (44). It
+    was the previous step's screens (41) or one of them pooled with the last frame (43). A
+    restored snapshot from before that step gives the same observation."""
+    seed = 5
+    kw = dict(obs="raw", num_envs=1, seed=seed, max_episode_frames=end_frame, autoreset=False,
+              inline_envs=0)
+    ale = new_ale(get_game("Breakout").rom_id, emulator_seeds(seed, 1)[0])
+    ale.reset_game()
+    screens = []
+    for _ in range(end_frame):
+        ale.act(ale.getMinimalActionSet()[1])  # FIRE
+        screens.append(ale.getScreenRGB().copy())
+    expected = (np.maximum(screens[-2], screens[-1]) if end_frame % 4 == 0 else screens[-1])
+    fire = np.ones(1, np.int32)
+    env, restored = make("Breakout", **kw), make("Breakout", **kw)
+    try:
+        env.reset()
+        for _ in range(10):
+            env.step(fire)
+        restored.reset()
+        restored.restore(env.snapshot())
+        obs, _, _, truncated, _ = env.step(fire)
+        assert truncated[0]
+        np.testing.assert_array_equal(np.asarray(obs)[0], expected)
+        np.testing.assert_array_equal(np.asarray(restored.step(fire)[0]), np.asarray(obs))
+    finally:
+        env.close()
+        restored.close()
+
+
 def reset_observations(game, mask, resets, num_envs=8):
     """(resets * num_envs) first observations of an episode and their obs_masked flags."""
     env = make(game, Config(observation=mask), obs="raw", num_envs=num_envs)

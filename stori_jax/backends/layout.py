@@ -38,6 +38,7 @@ def buffer_specs(num_envs: int, frame_skip: int) -> dict[str, tuple[tuple[int, .
         "lives": ((b,), np.int32),
         "event_fired": ((b,), np.int32),
         "ram_rendered": ((b,), np.uint8),              # render bits actually applied (0..3)
+        "single_frame": ((b,), np.uint8),              # both screens are one emulator frame
         "episode_return": ((b,), np.float32),          # final value where an episode ended
         "episode_length": ((b,), np.int32),
     }

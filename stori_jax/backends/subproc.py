@@ -247,7 +247,7 @@ class SubprocBackend:
             while self._inline_next < len(self._inline):
                 emulator = self._inline[self._inline_next]
                 try:
-                    emulator.step() if self._inline_command == b"S" else emulator.reset()
+                    emulator.step() if self._inline_command == b"S" else emulator.start_episode()
                 except BaseException:
                     # stopped inside an emulator's frame loop: its state is half a step
                     self._inline_broken = emulator.i

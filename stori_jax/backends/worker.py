@@ -85,6 +85,7 @@ class Emulator:
         self.episode_return = 0.0
         self.episode_length = 0
         rendered = 0
+        v["single_frame"][i] = 1
         if self.spec.want_screens:
             ale.getScreenRGB(self.frames[0])
             self.frames[1] = self.frames[0]
@@ -95,6 +96,14 @@ class Emulator:
         ale.getRAM(self.ram)
         v["ram_rendered"][i] = rendered
         v["lives"][i] = ale.lives()
+
+    def start_episode(self) -> None:
+        """A reset the parent asked for (not an autoreset): it reports no step's outcome, so
+        the previous step's reward, ends, events and episode totals do not carry over."""
+        for name in ("reward", "terminated", "truncated", "event_fired", "episode_return",
+                     "episode_length"):
+            self.v[name][self.i] = 0
+        self.reset()
 
     # -- snapshots --------------------------------------------------------------------------
 
@@ -139,10 +148,7 @@ class Emulator:
     def step(self) -> None:
         ale, v, i, spec = self.ale, self.v, self.i, self.spec
         if v["reset_first"][i]:
-            for name in ("reward", "terminated", "truncated", "event_fired", "episode_return",
-                         "episode_length"):
-                v[name][i] = 0
-            self.reset()
+            self.start_episode()
             return
         skip, per_frame = spec.frame_skip, spec.per_frame
         executed = v["executed"][i]
@@ -153,6 +159,7 @@ class Emulator:
         total = interval = 0.0
         fired = rendered = 0
         terminated = truncated = False
+        keep_end = not spec.autoreset  # an episode's end is observed (not replaced by a reset)
         for f in range(skip):
             draw = f if per_frame else 0
             if active and rule.pre_frame is not None:
@@ -185,15 +192,21 @@ class Emulator:
                     self.prev_ram[:] = self.ram
                 total += interval
                 interval = 0.0
-            if spec.want_screens and f >= skip - 2:
-                slot = max(f - (skip - 2), 0) if skip > 1 else 1
+            ends_early = done and keep_end and f < skip - 1
+            if spec.want_screens and (f >= skip - 2 or ends_early):
+                # slot 1: the step's last frame (the episode's last, where it ends early)
+                slot = 1 if f == skip - 1 or ends_early else 0
                 ale.getScreenRGB(self.frames[slot])
                 if render_bits & STEP_RENDER_BITS[slot] and self.render_ram_obs(slot):
                     rendered |= 1 << slot
             if done:
                 break
-        if spec.want_screens and skip == 1:
+        # one emulator frame makes the observation (both slots): frame_skip 1, or an episode
+        # that ended before the step's last frame (the screens before it are not this step's)
+        single = skip == 1 or (done and keep_end and f < skip - 1)
+        if spec.want_screens and single:
             self.frames[0] = self.frames[1]
+        v["single_frame"][i] = single
         self.episode_return += total
         self.episode_length += 1
         v["reward"][i] = total
@@ -258,7 +271,7 @@ def worker_main(spec: WorkerSpec, buffers, conn, parent_pid: int) -> None:
                     emulator.step()
             elif command == b"R":
                 for emulator in emulators:
-                    emulator.reset()
+                    emulator.start_episode()
             elif command == b"P":
                 reply += pickle.dumps([emulator.snapshot() for emulator in emulators])
             elif command[:1] == b"L":
