@@ -491,6 +491,8 @@ class Env:
                 "plan", "seed", "state", "reset_pending", "emulators"}:
             raise ValueError("snapshot must be a dict returned by Env.snapshot()")
         differs = _differences(snapshot["plan"], self.plan)
+        if not differs and hasattr(self.backend, "restore_differences"):
+            differs = self.backend.restore_differences(snapshot["emulators"])
         if differs:
             raise ValueError("snapshot was taken of a different env (make this one with the "
                              "same arguments): " + "; ".join(differs))

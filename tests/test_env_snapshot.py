@@ -94,6 +94,17 @@ def test_restore_checks_the_env_is_alike():
         assert ";" not in str(e.value), "only the differing field is named"
         with pytest.raises(ValueError, match="Env.snapshot"):
             other.restore({"plan": None})
+    # the frame limit is an emulator setting, not part of the plan: it diverged silently
+    with stori_jax.make("Breakout", "3.1", num_envs=2, seed=0, num_workers=1,
+                        max_episode_frames=40) as other:
+        other.reset()
+        with pytest.raises(ValueError, match="max_episode_frames 108000 there, 40 here"):
+            other.restore(snap)
+        other.step(np.zeros(2, np.int32))  # refused before anything changed: still usable
+    with stori_jax.make("Breakout", "3.1", num_envs=3, seed=0, num_workers=1) as other:
+        other.reset()
+        with pytest.raises(ValueError, match="num_envs 2 there, 3 here"):
+            other.restore(snap)
     with stori_jax.make("Breakout", "3.1", num_envs=2, seed=1, num_workers=1) as other:
         other.reset()
         other.restore(snap)  # another seed is alike: the run, and the seed, come from the snapshot

@@ -108,6 +108,7 @@ class SubprocBackend:
                  autoreset: bool = True, pool_screens: bool = False, inline_envs: int = 0):
         num_envs = len(seeds)
         self.frames_layout = "pooled" if pool_screens else "pair"
+        self.max_episode_frames = max_episode_frames
         ctx = mp.get_context("spawn")
         self.buffers = SharedBuffers.allocate(ctx, num_envs, frame_skip)
         self.views = self.buffers.views()
@@ -274,11 +275,22 @@ class SubprocBackend:
             states.extend(pickle.loads(replies[w]))
         return states
 
+    def restore_differences(self, states: list[dict]) -> list[str]:
+        """How the emulators of ``states`` differ from this backend's in what a restore cannot
+        change ('name A there, B here'): their number and the episode frame limit (an ALE
+        setting, not part of the state; snapshots of versions before it was recorded skip it)."""
+        here = len(self._inline) + sum(hi - lo for lo, hi in self.ranges)
+        if len(states) != here:
+            return [f"emulators {len(states)} there, {here} here"]
+        limits = {s.get("max_episode_frames", self.max_episode_frames) for s in states}
+        return [f"max_episode_frames {limit} there, {self.max_episode_frames} here"
+                for limit in sorted(limits - {self.max_episode_frames})]
+
     def restore(self, states: list[dict]) -> None:
         """Put every emulator back in a state taken by :meth:`snapshot` of a like backend."""
-        if len(states) != len(self._inline) + sum(hi - lo for lo, hi in self.ranges):
-            raise ValueError(f"snapshot holds {len(states)} emulators, this backend has "
-                             f"{len(self._inline) + sum(hi - lo for lo, hi in self.ranges)}")
+        differs = self.restore_differences(states)
+        if differs:
+            raise ValueError("snapshot was taken of different emulators: " + "; ".join(differs))
         self._send_each([b"L" + pickle.dumps(states[lo:hi]) for lo, hi in self.ranges])
         for emulator, snap in zip(self._inline, states):
             emulator.restore(snap)

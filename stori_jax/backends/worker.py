@@ -112,7 +112,8 @@ class Emulator:
         return dict(ale=pickle.dumps(self.ale.cloneState(include_rng=True)),
                     prev_ram=self.prev_ram.copy(), start_ram=self.start_ram.copy(),
                     rule_state=copy.deepcopy(self.rule_state), carry=self.carry,
-                    episode_return=self.episode_return, episode_length=self.episode_length)
+                    episode_return=self.episode_return, episode_length=self.episode_length,
+                    max_episode_frames=self.spec.max_episode_frames)  # an ALE setting, not state
 
     def restore(self, snap: dict) -> None:
         self.ale.restoreState(pickle.loads(snap["ale"]))
