@@ -16,6 +16,7 @@ from __future__ import annotations
 import functools
 import itertools
 import logging
+import weakref
 from typing import NamedTuple
 
 import jax
@@ -86,9 +87,28 @@ def xla_step(plan, emulate, handle: XlaHandle, actions):
 
 
 def make_step(plan, emulate):
-    """``step(handle, actions)``, jitted (it may also be called inside a caller's jit)."""
+    """``step(handle, actions)``, jitted (it may also be called inside a caller's jit).
+    ``emulate`` is a bound method of the env, held weakly: JAX's caches keep every traced
+    callback alive, and a strong one would keep the env and its worker processes with it."""
     _quiet_callback_log()
-    return jax.jit(functools.partial(xla_step, plan, emulate))
+    return jax.jit(functools.partial(xla_step, plan, _weak_callback(emulate)))
+
+
+def _weak_callback(method):
+    """``method`` (bound) called through a weak reference to its object."""
+    ref = weakref.WeakMethod(method)
+
+    def callback(*args):
+        bound = ref()
+        if bound is None:
+            from stori_jax.backends.subproc import EnvClosedError
+
+            raise marked(EnvClosedError("the environment of this xla() step was garbage "
+                                        "collected (its workers are closed); keep the env "
+                                        "while you step it"))
+        return bound(*args)
+
+    return callback
 
 
 # An error raised in the emulators' callback reaches the caller as a JaxRuntimeError whose

@@ -59,6 +59,25 @@ def test_deleting_the_env_stops_its_workers():
     assert wait_gone(pids, 3.0)
 
 
+def test_deleting_an_env_stepped_through_xla_stops_its_workers():
+    """JAX's caches keep every traced host callback: the env's must not keep the env (and its
+    workers) alive. A step function kept past its env says the env is gone."""
+    import jax
+    import jax.numpy as jnp
+
+    env = make("Breakout", num_envs=2)
+    env.reset()
+    handle, step = env.xla()
+    handle, out = step(handle, jnp.zeros(2, jnp.int32))
+    jax.block_until_ready(out)
+    pids = list(env.backend.pids)
+    del env, out
+    gc.collect()
+    assert wait_gone(pids, 3.0)
+    with pytest.raises(Exception, match="garbage collected"):
+        jax.block_until_ready(step(handle, jnp.zeros(2, jnp.int32)))
+
+
 @pytest.mark.timeout(30)
 def test_a_killed_worker_raises_worker_error_quickly():
     env = make("Breakout", num_envs=4, num_workers=2)
