@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import tempfile
 from pathlib import Path
 
 from stori_jax.checks import check_int
@@ -53,7 +54,9 @@ def _cmd_run(args) -> int:
     print(f"episodes finished : {stats['episodes']}")
     print(f"mean return       : {'n/a (no episode finished)' if mean is None else f'{mean:.2f}'}")
     print(f"events fired      : {stats['events_fired']}")
-    print(f"corrupted actions : {stats['corrupted_actions']}")
+    print(f"corrupted actions : {stats['corrupted_actions']} of {stats['action_draws']} "
+          f"({stats['corrupted_fraction']:.2f}; one draw per emulator frame at frame "
+          "granularity)")
     print(f"concept switches  : {stats['concept_switches']}")
     print(f"masked obs        : {stats['masked_obs']} of {env_steps}")
     print(f"env steps / s     : {stats['env_steps_per_s']:.0f} ({env_steps} steps in "
@@ -74,6 +77,11 @@ def check_out(flag: str, path: Path, *, directory: bool) -> None:
         if parent.exists():
             if not parent.is_dir():
                 raise ValueError(f"{flag} {path}: {parent} is a file, not a directory")
+            try:  # what the command will do there: create an entry (removed at once)
+                tempfile.TemporaryDirectory(dir=parent).cleanup()
+            except OSError as e:
+                raise ValueError(f"{flag} {path}: cannot write in {parent} "
+                                 f"({e.strerror or e})") from None
             return
 
 
@@ -127,9 +135,8 @@ def _config_for(args):
 
     if args.preset is not None and args.config is not None:
         raise ValueError("give a PRESET or --config FILE (a reference-format JSON), not both")
-    if args.preset is None and args.config is None:
-        raise ValueError("give a PRESET (e.g. 3.1; `stori-jax list` shows them) or --config "
-                         "FILE (a reference-format JSON)")
+    if args.preset is None and args.config is None:  # as `run`: 3.1, for any ale-py game
+        return "3.1", stori_jax.Config()
     if args.preset is not None:
         return args.preset, stori_jax.preset(args.game, args.preset)
     path = Path(args.config)
@@ -146,30 +153,40 @@ def _config_for(args):
     return path.stem, stori_jax.Config.from_reference(reference, game=args.game)
 
 
-def _check_show_record(args, steps_flag: str, steps: int) -> None:
+PICTURE_SUFFIX = {"show": ".png", "record": ".gif"}  # what each command writes
+
+
+def _picture_out(args, steps_flag: str, steps: int):
+    """(name, config, output path) of ``show`` / ``record``, every argument checked before
+    anything runs."""
     check_int(steps_flag, steps, 1)
     check_int("--seed", args.seed, 0)
+    suffix = PICTURE_SUFFIX[args.command]
     if args.out is not None:
         check_out("--out", args.out, directory=False)
+        if Path(args.out).suffix.lower() != suffix:
+            raise ValueError(f"--out {args.out}: {args.command} writes a "
+                             f"{suffix[1:].upper()}; give a path ending in {suffix}")
+    name, config = _config_for(args)
+    return name, config, args.out or Path(f"{args.game}-{name}{suffix}")
 
 
 def _cmd_show(args) -> int:
     from stori_jax.visual import contact_sheet
 
-    _check_show_record(args, "--steps", args.steps)
-    name, config = _config_for(args)
-    out = args.out or Path(f"{args.game}-{name}.png")
-    print(f"wrote {contact_sheet(args.game, name, config, out, steps=args.steps, seed=args.seed)}")
+    name, config, out = _picture_out(args, "--steps", args.steps)
+    path = contact_sheet(args.game, name, config, out, steps=args.steps, seed=args.seed,
+                         progress=True)
+    print(f"wrote {path}")
     return 0
 
 
 def _cmd_record(args) -> int:
     from stori_jax.visual import record_episode
 
-    _check_show_record(args, "--max-steps", args.max_steps)
-    name, config = _config_for(args)
-    out = args.out or Path(f"{args.game}-{name}.gif")
-    path = record_episode(args.game, name, config, out, max_steps=args.max_steps, seed=args.seed)
+    name, config, out = _picture_out(args, "--max-steps", args.max_steps)
+    path = record_episode(args.game, name, config, out, max_steps=args.max_steps, seed=args.seed,
+                          progress=True)
     print(f"wrote {path}")
     return 0
 
@@ -218,7 +235,8 @@ def build_parser() -> argparse.ArgumentParser:
                               ("record", "animated GIF of an episode with per-step overlay")):
         p = sub.add_parser(command, help=helptext)
         p.add_argument("game", help=GAME_HELP)
-        p.add_argument("preset", nargs="?", default=None, help=PRESET_HELP + "; or --config")
+        p.add_argument("preset", nargs="?", default=None,
+                       help=PRESET_HELP + "; or --config; default 3.1")
         p.add_argument("--config", default=None, help="a reference-format JSON file instead")
         p.add_argument("--seed", type=int, default=0, help=SEED_HELP)
         suffix = "png" if command == "show" else "gif"
@@ -226,7 +244,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help=f"file to write (default <game>-<preset>.{suffix})")
         if command == "show":
             p.add_argument("--steps", type=int, default=200,
-                           help="agent steps to play before the picture (default 200)")
+                           help="agent steps to play (or until the episode ends); the sheet "
+                                "shows moments spread over them (default 200)")
         else:
             p.add_argument("--max-steps", type=int, default=1000,
                            help="agent steps at most, if the episode is longer (default 1000)")

@@ -53,7 +53,7 @@ def play(env, obs, seed: int, *, max_steps: int, episodes: int | None = None,
     bar.close()
     elapsed = time.perf_counter() - start
     return dict(episodes=len(returns), mean_return=float(np.mean(returns)) if returns else None,
-                events_fired=events, corrupted_actions=corrupted,
+                events_fired=events, corrupted_actions=corrupted, action_draws=slots,
                 corrupted_fraction=corrupted / max(slots, 1), masked_obs=masked,
                 masked_fraction=masked / max(steps * env.num_envs, 1), concept_switches=switches,
                 agent_steps=steps, env_steps_per_s=steps * env.num_envs / elapsed,

@@ -23,33 +23,42 @@ def _pil():
     return Image, ImageDraw
 
 
-def twin_run(game: str, config: Config, steps: int, seed: int = 0):
+def twin_run(game: str, config: Config, steps: int, seed: int = 0, *, with_twin: bool = True,
+             progress: str | None = None):
     """Run ``config`` and its 3.1 twin side by side on the same intended actions (the same
-    game unless the preset corrupts actions).
+    game unless the preset corrupts actions); ``with_twin=False`` runs the preset alone.
+    ``progress``: a progress bar's label (None: no bar).
 
-    Returns a list of per-step dicts: 'twin' and 'preset' screens (210, 160, 3), the intended and
-    executed actions, and the step's perturbation flags."""
+    Returns a list of per-step dicts: 'twin' (None without one) and 'preset' screens
+    (210, 160, 3), the intended and executed actions, and the step's perturbation flags."""
+    from tqdm import tqdm
+
     import stori_jax
 
     rng = np.random.default_rng(seed)
     env = stori_jax.make(game, config=config, num_envs=1, seed=seed, obs="raw", num_workers=1)
-    twin = stori_jax.make(game, num_envs=1, seed=seed, obs="raw", num_workers=1)
+    twin = (stori_jax.make(game, num_envs=1, seed=seed, obs="raw", num_workers=1)
+            if with_twin else None)
+
+    def screen(obs):  # env 0's screen of a batch of one, if there is one
+        return None if obs is None else np.asarray(obs[0])
+
     frames = []
     try:
         obs, info = env.reset()
-        twin_obs, _ = twin.reset()
-        frames.append(dict(step=0, preset=np.asarray(obs[0]), twin=np.asarray(twin_obs[0]),
+        twin_obs = twin.reset()[0] if twin is not None else None
+        frames.append(dict(step=0, preset=screen(obs), twin=screen(twin_obs),
                            corrupted=False, event=0, concept=0,
                            masked=bool(np.asarray(info["obs_masked"])[0]), action=None,
                            executed=None))
-        for t in range(1, steps + 1):
+        for t in tqdm(range(1, steps + 1), desc=progress, unit="step", disable=progress is None):
             action = np.array([rng.integers(env.num_actions)], np.int32)
             obs, reward, terminated, truncated, info = env.step(action)
             executed = np.asarray(info["executed_action"]).reshape(1, -1)
             # the twin gets the intended action: without type-1 noise it plays the same game
-            twin_obs, *_ = twin.step(action)
+            twin_obs = twin.step(action)[0] if twin is not None else None
             frames.append(dict(
-                step=t, preset=np.asarray(obs[0]), twin=np.asarray(twin_obs[0]),
+                step=t, preset=screen(obs), twin=screen(twin_obs),
                 corrupted=bool(np.asarray(info["action_corrupted"]).any()),
                 event=int(np.asarray(info["event_fired"])[0]),
                 concept=int(np.asarray(info["concept"])[0]),
@@ -59,7 +68,8 @@ def twin_run(game: str, config: Config, steps: int, seed: int = 0):
                 break
     finally:
         env.close()
-        twin.close()
+        if twin is not None:
+            twin.close()
     return frames
 
 
@@ -87,10 +97,10 @@ def _caption(f) -> str:
 
 
 def contact_sheet(game: str, name: str, config: Config, path: Path, *, steps: int = 200,
-                  moments: int = 4, seed: int = 0) -> Path:
+                  moments: int = 4, seed: int = 0, progress: bool = False) -> Path:
     """A PNG: columns are moments of one run, the top row the 3.1 twin, the bottom the preset."""
     Image, ImageDraw = _pil()
-    frames = twin_run(game, config, steps, seed)
+    frames = twin_run(game, config, steps, seed, progress=f"{game} {name}" if progress else None)
     columns = [frames[i] for i in _moments(frames, moments)]
     w, h, pad, top, title = 160, 210, 6, 16, 36
     sheet = Image.new("RGB", (len(columns) * (w + pad) + pad, title + 2 * (h + top + pad)),
@@ -112,10 +122,11 @@ def contact_sheet(game: str, name: str, config: Config, path: Path, *, steps: in
 
 
 def record_episode(game: str, name: str, config: Config, path: Path, *, max_steps: int = 1000,
-                   seed: int = 0) -> Path:
+                   seed: int = 0, progress: bool = False) -> Path:
     """An animated GIF of one episode of the preset, with a line per step of what happened."""
     Image, ImageDraw = _pil()
-    frames = twin_run(game, config, max_steps, seed)
+    frames = twin_run(game, config, max_steps, seed, with_twin=False,
+                      progress=f"{game} {name}" if progress else None)
     w, h, bar = 160 * SCALE, 210 * SCALE, 40
     images = []
     for f in frames:

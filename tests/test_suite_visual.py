@@ -51,11 +51,28 @@ def test_record_writes_an_animated_gif(tmp_path):
         assert gif.n_frames == 13  # the first observation and 12 steps
 
 
+def test_show_and_record_without_a_preset_play_3_1_of_any_ale_py_game(tmp_path, capsys):
+    """As `run` (and the help says): no preset is 3.1, so a game without presets works too."""
+    assert main(["show", "Pong", "--steps", "4", "--out", str(tmp_path / "pong.png")]) == 0
+    assert main(["record", "Breakout", "--max-steps", "3", "--out",
+                 str(tmp_path / "b.GIF")]) == 0
+    with Image.open(tmp_path / "b.GIF") as gif:
+        assert gif.format == "GIF" and gif.n_frames == 4
+    with Image.open(tmp_path / "pong.png") as sheet:
+        assert sheet.format == "PNG"
+
+
 @pytest.mark.parametrize("argv, message", [
     (["suite", "--games", "Pong"], "unknown game 'Pong' for presets"),
     (["suite", "--episodes", "0"], "--episodes must be >= 1"),
-    (["show", "Breakout"],
-     "give a PRESET (e.g. 3.1; `stori-jax list` shows them) or --config FILE"),
+    (["show", "Pong", "3.1"], "another ale-py game takes no preset"),
+    # the format follows the command, checked before anything runs (a .jpg record crashed in
+    # Pillow after the whole episode; a .gif sheet was silently a GIF)
+    (["record", "Breakout", "3.1", "--out", "r.jpg"],
+     "--out r.jpg: record writes a GIF; give a path ending in .gif"),
+    (["show", "Breakout", "3.1", "--out", "noext"],
+     "--out noext: show writes a PNG; give a path ending in .png"),
+    (["show", "Breakout", "3.1", "--out", "x.gif"], "show writes a PNG"),
 ])
 def test_bad_arguments(argv, message, capsys):
     assert main(argv) == 2
