@@ -41,6 +41,9 @@ def _unwrapped(value: Any) -> Any:
     return value
 
 
+MAX_INT32 = 2**31 - 1  # counts JAX and envpool hold as int32 (frames, no-ops, drift periods)
+
+
 def check_int(name: str, value: Any, minimum: int | None = None,
               maximum: int | None = None) -> int:
     """``value`` as an int in [minimum, maximum] (either bound may be None); bools refused."""

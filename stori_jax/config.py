@@ -21,7 +21,7 @@ import numbers
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
-from .checks import check_int, check_probability
+from .checks import MAX_INT32, check_int, check_probability
 from .games import get_game
 from .games.base import CROP_MODES
 
@@ -133,6 +133,9 @@ class ConceptDrift:
         object.__setattr__(self, "period", period)
         if period < 1:
             raise ValueError(f"ConceptDrift.period (T) must be >= 1 agent step, got {period}")
+        if period > MAX_INT32:  # episode steps are counted in int32
+            raise ValueError(f"ConceptDrift.period (T) must be <= {MAX_INT32} agent steps, "
+                             f"got {period}")
         if not isinstance(self.secondary, Config):
             raise ValueError("ConceptDrift.secondary must be a Config of type "
                              f"{list(SECONDARY_TYPES)}, got {self.secondary!r}")

@@ -15,7 +15,7 @@ import numpy as np
 from stori_jax.backends.layout import RAM_SIZE, SCREEN
 from stori_jax.backends.subproc import (EnvClosedError, InterruptedStepError, SubprocBackend,
                                         WorkersLate)
-from stori_jax.checks import check_int, check_real
+from stori_jax.checks import MAX_INT32, check_int, check_real
 from stori_jax.config import Config, GRANULARITIES
 from stori_jax.core import (Draws, EnvState, WorkerOutputs, before_step, finish_step,
                             initial_state)
@@ -35,7 +35,6 @@ def emulator_seeds(seed: int, num_envs: int) -> list[int]:
 
 # seeds feed 32-bit JAX keys and envpool's int32 seed: larger ones would alias smaller ones
 MAX_SEED = 2**31 - 1
-MAX_INT32 = 2**31 - 1  # frame counts and no-op draws are int32 in JAX and in envpool
 
 
 def resolve_config(game: str, preset: str | None, config: Config | None) -> Config:
@@ -77,7 +76,11 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
         if granularity not in GRANULARITIES:
             raise ValueError(f"granularity must be one of {list(GRANULARITIES)} or None, "
                              f"got {granularity!r}")
-        cfg = cfg.replace(granularity=granularity)
+        drift = cfg.drift
+        if drift is not None:  # the override covers concept 2 too: its field back to the default
+            drift = dataclasses.replace(drift, secondary=drift.secondary.replace(
+                granularity="frame"))
+        cfg = cfg.replace(granularity=granularity, drift=drift)
     num_envs = check_int("num_envs", num_envs, 1)
     seed = check_int("seed", seed, 0, MAX_SEED)
     if not isinstance(autoreset, (bool, np.bool_)):

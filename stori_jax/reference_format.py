@@ -21,8 +21,8 @@ from __future__ import annotations
 
 from typing import Any, Mapping
 
-from stori_jax.config import (ActionNoise, Config, ConceptDrift, ObservationMask, RandomEvent,
-                              SECONDARY_TYPES)
+from stori_jax.config import (DRIFT_SCHEDULES, MASK_KINDS, SECONDARY_TYPES, ActionNoise, Config,
+                              ConceptDrift, ObservationMask, RandomEvent)
 
 _TYPES = ("1", "2.1", "2.2", "3.1", "3.2")
 _ACTION = "intrinsic_stochasticity.action_dependent"
@@ -35,6 +35,15 @@ KNOWN_KEYS = ("stochasticity_type",
               f"{_DRIFT}.temporal_mode", f"{_DRIFT}.temporal_threshold",
               f"{_DRIFT}.secondary_concept_type",
               f"{_OBS}.type", f"{_OBS}.mode", f"{_OBS}.prob")
+# the Config fields each key sets, as the errors of Config name them
+_FIELD_KEYS = {"ActionNoise.prob": f"{_ACTION}.stochastic_action_prob",
+               "RandomEvent.mode": f"{_RANDOM}.mode", "Config.event.mode": f"{_RANDOM}.mode",
+               "RandomEvent.prob": f"{_RANDOM}.random_stochasticity_prob",
+               "ConceptDrift.period": f"{_DRIFT}.temporal_threshold",
+               "ObservationMask.mode": f"{_OBS}.mode", "Config.observation.mode": f"{_OBS}.mode",
+               "ObservationMask.prob": f"{_OBS}.prob",
+               "Config.drift.secondary.event.mode": f"{_RANDOM}.mode",
+               "Config.drift.secondary.observation.mode": f"{_OBS}.mode"}
 
 
 def flatten(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -73,6 +82,14 @@ class _Reader:
         except (TypeError, ValueError):
             raise ValueError(f"reference config {key!r} must be {what}, got {value!r}") from None
 
+    def choice(self, key: str, allowed) -> str:
+        """The string ``key`` holds, one of ``allowed`` (spelt exactly)."""
+        what = "one of " + str(list(allowed))
+        value = self.get(key, lambda v: str(v).strip(), what)
+        if value not in allowed:
+            raise ValueError(f"reference config {key!r} must be {what}, got {value!r}")
+        return value
+
 
 def _mode(value) -> int:
     text = str(value).strip()
@@ -108,7 +125,7 @@ def _concept(kind: str, r: _Reader) -> Config:
             mode=r.get(f"{_RANDOM}.mode", _mode, "an event mode ('1', '2', ...)"),
             prob=r.get(f"{_RANDOM}.random_stochasticity_prob", _probability, "a probability")))
     if kind == "3.2":
-        kind_ = r.get(f"{_OBS}.type", str, "'crop', 'blackout' or 'ram'")
+        kind_ = r.choice(f"{_OBS}.type", MASK_KINDS)
         mode = r.get(f"{_OBS}.mode", _mode, "a mode ('1', '2', ...)")
         prob = (r.get(f"{_OBS}.prob", _probability, "a probability")
                 if f"{_OBS}.prob" in r.flat else 1.0)
@@ -133,19 +150,21 @@ def config_from_reference(d: Mapping[str, Any], game: str | None = None) -> Conf
         raise ValueError(f"reference config has unknown key(s) {unknown}; "
                          f"known keys: {list(KNOWN_KEYS)}")
     r = _Reader(flat)
-    kind = r.get("stochasticity_type", lambda v: str(v).strip(), f"one of {list(_TYPES)}")
-    if kind not in _TYPES:
-        raise ValueError(f"stochasticity_type must be one of {list(_TYPES)}, got {kind!r}")
-    if kind == "2.2":
-        secondary_type = r.get(f"{_DRIFT}.secondary_concept_type", lambda v: str(v).strip(),
-                               f"one of {list(SECONDARY_TYPES)}")
-        if secondary_type not in SECONDARY_TYPES:
-            raise ValueError(f"{_DRIFT}.secondary_concept_type must be one of "
-                             f"{list(SECONDARY_TYPES)}, got {secondary_type!r}")
-        config = Config(drift=ConceptDrift(
-            schedule=r.get(f"{_DRIFT}.temporal_mode", str, "'sudden' or 'cyclic'"),
-            period=r.get(f"{_DRIFT}.temporal_threshold", _count, "an int number of agent steps"),
-            secondary=_concept(secondary_type, r)))
-    else:
-        config = _concept(kind, r)
-    return config.for_game(game) if game is not None else config
+    try:
+        kind = r.choice("stochasticity_type", _TYPES)
+        if kind == "2.2":
+            secondary_type = r.choice(f"{_DRIFT}.secondary_concept_type", SECONDARY_TYPES)
+            config = Config(drift=ConceptDrift(
+                schedule=r.choice(f"{_DRIFT}.temporal_mode", DRIFT_SCHEDULES),
+                period=r.get(f"{_DRIFT}.temporal_threshold", _count,
+                             "an int number of agent steps"),
+                secondary=_concept(secondary_type, r)))
+        else:
+            config = _concept(kind, r)
+        return config.for_game(game) if game is not None else config
+    except ValueError as error:  # name the key the user wrote, not only the Config field
+        message = str(error)
+        for field_name, key in _FIELD_KEYS.items():
+            if message.startswith(field_name):
+                raise ValueError(f"reference config {key!r}: {message}") from None
+        raise

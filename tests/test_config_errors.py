@@ -328,7 +328,7 @@ def test_reference_not_a_dict(d):
 
 @pytest.mark.parametrize("stype", ["0", "4", "2.3", "3.2A", "", None])
 def test_reference_bad_type(stype):
-    with pytest.raises(ValueError, match=r"stochasticity_type must be one of "
+    with pytest.raises(ValueError, match=r"'stochasticity_type' must be one of "
                                          + re.escape("['1', '2.1', '2.2', '3.1', '3.2']")):
         Config.from_reference({"stochasticity_type": stype})
 
@@ -403,19 +403,29 @@ def test_reference_threshold_accepts_integral_values():
 
 @pytest.mark.parametrize("secondary", ["2.2", "3.1", "0", "4", ""])
 def test_reference_bad_secondary(secondary):
-    with pytest.raises(ValueError, match=rf"{re.escape(DRIFT)}\.secondary_concept_type must be "
+    with pytest.raises(ValueError, match=rf"{re.escape(DRIFT)}\.secondary_concept_type' must be "
                                          rf"one of {SECONDARY}, got '{re.escape(secondary)}'"):
         Config.from_reference(drift_ref(**{f"{DRIFT}.secondary_concept_type": secondary}))
 
 
 def test_reference_values_checked_by_config():
-    with pytest.raises(ValueError, match=r"ConceptDrift\.period \(T\) must be >= 1"):
+    """Errors name the key the user wrote (and the Config field that checked it)."""
+    threshold = re.escape(f"'{DRIFT}.temporal_threshold': ")
+    with pytest.raises(ValueError, match=threshold + r"ConceptDrift\.period \(T\) must be >= 1"):
         Config.from_reference(drift_ref(**{f"{DRIFT}.temporal_threshold": 0}))
-    with pytest.raises(ValueError, match=r"ConceptDrift\.schedule must be one of"):
-        Config.from_reference(drift_ref(**{f"{DRIFT}.temporal_mode": "weird"}))
-    with pytest.raises(ValueError, match=rf"ActionNoise\.prob must be in {PROB}, got 1\.5"):
+    with pytest.raises(ValueError, match=threshold + r"ConceptDrift\.period \(T\) must be <= "
+                                         r"2147483647 agent steps, got 3000000000"):
+        Config.from_reference(drift_ref(**{f"{DRIFT}.temporal_threshold": 3_000_000_000}))
+    with pytest.raises(ValueError, match=re.escape(
+            f"'{DRIFT}.temporal_mode' must be one of ['sudden', 'cyclic', 'gradual'], "
+            "got 'Sudden'")):
+        Config.from_reference(drift_ref(**{f"{DRIFT}.temporal_mode": "Sudden"}))
+    with pytest.raises(ValueError, match=re.escape(f"'{IS}.action_dependent.stochastic_action_prob"
+                                                   "': ") + rf"ActionNoise\.prob must be in "
+                                         rf"{PROB}, got 1\.5"):
         Config.from_reference(ref("1", **{f"{IS}.action_dependent.stochastic_action_prob": 1.5}))
-    with pytest.raises(ValueError, match=r"ObservationMask\.kind must be one of"):
+    with pytest.raises(ValueError, match=r"'partial_observation\.type' must be one of \['crop', "
+                                         r"'blackout', 'ram'\], got 'hide'"):
         Config.from_reference(ref("3.2", partial_observation__type="hide",
                                   partial_observation__mode="1"))
     with pytest.raises(ValueError, match=r"ObservationMask\.mode \(crop\) must be one of"):
@@ -454,3 +464,12 @@ def test_zero_dimensional_arrays_are_numbers():
         ActionNoise(jax.random.key(0))  # a typed key is 0-d too, and no number
     with pytest.raises(ValueError, match="ActionNoise.prob must be a number in"):
         jax.jit(lambda p: ActionNoise(p).prob)(0.3)  # traced: no number yet
+
+
+def test_a_drift_period_beyond_int32_is_refused_at_construction():
+    """Episode steps are int32: T = 2**31 used to pass and fail at the first step inside JAX."""
+    with pytest.raises(ValueError, match=r"ConceptDrift\.period \(T\) must be <= 2147483647 "
+                                         r"agent steps, got 2147483648"):
+        ConceptDrift("sudden", 2**31, Config(action_noise=ActionNoise(0.1)))
+    assert ConceptDrift("sudden", 2**31 - 1, Config(action_noise=ActionNoise(0.1))).period \
+        == 2**31 - 1

@@ -120,3 +120,16 @@ def test_drift_to_an_event_keeps_the_episode_start_ram():
     assert not fired[:T].any()
     np.testing.assert_array_equal(fired[T], missing[T])
     np.testing.assert_array_equal(blocks[T + 1:], np.broadcast_to(start, blocks[T + 1:].shape))
+
+
+def test_make_granularity_overrides_a_drift_secondary_s_too():
+    """``make(granularity=...)`` overrides the config's: concept 2's own field included (it
+    refused a secondary set to 'step', telling the user to set a field they had not passed)."""
+    step = Config(granularity="step", drift=ConceptDrift("sudden", 5, Config(
+        action_noise=ActionNoise(0.3), granularity="step")))
+    env = make("Breakout", step, granularity="frame")
+    try:
+        assert env.config.granularity == "frame" and env.plan.per_frame
+        assert env.config.drift.secondary.granularity == "frame"
+    finally:
+        env.close()
