@@ -136,7 +136,9 @@ def next_state_variance(states) -> np.ndarray:
     """Total variance across a batch of the states reached under the same action sequence from
     the same start: ``states`` (T, B, D) -> (T,), the sum over D of the variance over B.
     Zero for a deterministic game (3.1); it grows with exogenous noise (2.1)."""
-    s = np.asarray(states, np.float64)
-    if s.ndim != 3:
-        raise ValueError(f"states must be (T, B, D), got shape {s.shape}")
+    s = _as_float_array("states", states)
+    if s.ndim != 3 or 0 in s.shape:
+        raise ValueError(f"states must be (T, B, D) with T, B, D >= 1, got shape {s.shape}")
+    if not np.isfinite(s).all():
+        raise ValueError("states must be finite numbers, got NaN or infinity")
     return s.var(axis=1).sum(axis=-1)

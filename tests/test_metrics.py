@@ -57,6 +57,15 @@ def test_bad_inputs():
         empirical_action_information([0, 1], [0], 4)
     with pytest.raises(ValueError, match=r"states must be \(T, B, D\)"):
         next_state_variance(np.zeros((3, 4)))
+    # an empty batch gave NaN with a numpy warning; text and ragged lists numpy's own words
+    with pytest.raises(ValueError, match=r"T, B, D >= 1, got shape \(2, 0, 3\)"):
+        next_state_variance(np.zeros((2, 0, 3)))
+    with pytest.raises(ValueError, match="states must be an array of numbers"):
+        next_state_variance([[["a"]]])
+    with pytest.raises(ValueError, match="states must be an array of numbers"):
+        next_state_variance([[[1.0], [1.0, 2.0]]])
+    with pytest.raises(ValueError, match="states must be finite numbers"):
+        next_state_variance(np.full((1, 2, 3), np.nan))
 
 
 def test_empirical_action_ids_are_validated():
