@@ -96,9 +96,16 @@ def cmd_train(args) -> int:
             raise ValueError(f"set {name} with {flags[name]}, not --set")
         if name not in settable:
             raise ValueError(f"unknown PPO hyperparameter {name!r}; --set takes {settable}")
-    config = PPOConfig.from_overrides(
-        PPOConfig(game=args.game, preset=args.preset, seed=args.seed, total_steps=args.steps),
-        overrides)
+    try:
+        config = PPOConfig.from_overrides(
+            PPOConfig(game=args.game, preset=args.preset, seed=args.seed, total_steps=args.steps),
+            overrides)
+    except ValueError as error:  # name the flag the user gave, not the config field
+        message = str(error)
+        for name, flag in flags.items():
+            if message.startswith(name + " "):
+                raise ValueError(flag + message[len(name):]) from None
+        raise
     out = args.out or run_dir(DEFAULT_ROOT, config.game, config.preset, "ppo", config.seed)
     check_out("--out", out, directory=True)
     if not args.resume and (out / "checkpoint.pkl").exists():
@@ -134,17 +141,17 @@ def cmd_eval(args) -> int:
     import stori_jax
     from baselines.evaluate import EVAL_SEED_OFFSET, evaluate, stori_game, write_result
     from baselines.ppo import load_checkpoint
-    from stori_jax.checks import check_int
+    from stori_jax.checks import MAX_SEED, check_int
     from stori_jax.cli import check_out
-    from stori_jax.env import MAX_SEED
 
     if args.random == (args.checkpoint is not None):
         raise ValueError("give either --checkpoint PATH or --random (with --game and --preset)")
-    for flag, value, minimum in (("--seed", args.seed, 0), ("--eval-seed", args.eval_seed, 0),
-                                 ("--episodes", args.episodes, 1),
-                                 ("--num-envs", args.num_envs, 1)):
+    for flag, value, minimum, maximum in (("--seed", args.seed, 0, MAX_SEED),
+                                          ("--eval-seed", args.eval_seed, 0, MAX_SEED),
+                                          ("--episodes", args.episodes, 1, None),
+                                          ("--num-envs", args.num_envs, 1, None)):
         if value is not None:
-            check_int(flag, value, minimum)
+            check_int(flag, value, minimum, maximum)
     if args.random:
         if args.game is None or args.preset is None:
             raise ValueError("--random needs --game and --preset")

@@ -104,7 +104,7 @@ class PPOConfig:
         for name in ("anneal_lr", "clip_vloss"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
-        from stori_jax.env import MAX_SEED
+        from stori_jax.checks import MAX_SEED
 
         if self.seed > (MAX_SEED - 1) // 2:  # the two halves' envs use seeds 2*seed, 2*seed+1
             raise ValueError(f"seed must be in [0, {(MAX_SEED - 1) // 2}], got {self.seed}")

@@ -42,6 +42,7 @@ def _unwrapped(value: Any) -> Any:
 
 
 MAX_INT32 = 2**31 - 1  # counts JAX and envpool hold as int32 (frames, no-ops, drift periods)
+MAX_SEED = MAX_INT32  # JAX keys are 32-bit and envpool's seed an int32: a larger one would alias
 
 
 def check_int(name: str, value: Any, minimum: int | None = None,

@@ -10,7 +10,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from stori_jax.checks import check_int
+from stori_jax.checks import MAX_SEED, check_int
 from stori_jax.config import GRANULARITIES
 from stori_jax.plan import OBS_KINDS
 
@@ -110,7 +110,7 @@ def _cmd_suite(args) -> int:
     for name, value in (("--episodes", args.episodes), ("--num-envs", args.num_envs),
                         ("--max-steps", args.max_steps)):
         check_int(name, value, 1)
-    check_int("--seed", args.seed, 0)
+    check_int("--seed", args.seed, 0, MAX_SEED)
     if args.out is not None:
         check_out("--out", args.out, directory=True)
     games = args.games
@@ -160,7 +160,7 @@ def _picture_out(args, steps_flag: str, steps: int):
     """(name, config, output path) of ``show`` / ``record``, every argument checked before
     anything runs."""
     check_int(steps_flag, steps, 1)
-    check_int("--seed", args.seed, 0)
+    check_int("--seed", args.seed, 0, MAX_SEED)
     suffix = PICTURE_SUFFIX[args.command]
     if args.out is not None:
         check_out("--out", args.out, directory=False)
@@ -272,6 +272,7 @@ def main(argv: list[str] | None = None) -> int:
 
             return COMMANDS[args.command](args)
         check_int("--steps", args.steps, 1)
+        check_int("--seed", args.seed, 0, MAX_SEED)
         return _cmd_run(args)
     except BrokenPipeError:
         # the reader went away (`stori-jax list | head`): stop quietly, and let no later write

@@ -15,7 +15,7 @@ import numpy as np
 from stori_jax.backends.layout import RAM_SIZE, SCREEN
 from stori_jax.backends.subproc import (EnvClosedError, InterruptedStepError, SubprocBackend,
                                         WorkersLate)
-from stori_jax.checks import MAX_INT32, check_int, check_real
+from stori_jax.checks import MAX_INT32, MAX_SEED, check_int, check_real
 from stori_jax.config import Config, GRANULARITIES
 from stori_jax.core import (Draws, EnvState, WorkerOutputs, before_step, finish_step,
                             initial_state)
@@ -34,7 +34,6 @@ def emulator_seeds(seed: int, num_envs: int) -> list[int]:
 
 
 # seeds feed 32-bit JAX keys and envpool's int32 seed: larger ones would alias smaller ones
-MAX_SEED = 2**31 - 1
 
 
 def resolve_config(game: str, preset: str | None, config: Config | None) -> Config:

@@ -74,7 +74,7 @@ class _Owner:
                              f"from it and i); per-env seed lists are not supported, got {seed!r}")
         if seed is not None and not (self._fresh and seed == self._seed):
             from stori_jax.checks import check_int
-            from stori_jax.env import MAX_SEED
+            from stori_jax.checks import MAX_SEED
 
             check_int("seed", seed, 0, MAX_SEED)  # a refused seed leaves the env as it was
             self._env.close()

@@ -372,7 +372,7 @@ def test_smoothing_is_the_mean_of_the_latest_episodes():
     (["train", "ppo", "--game", "Breakout", "--set", "nope=1"],
      "unknown PPO hyperparameter 'nope'; --set takes ['action_head', "),
     (["train", "ppo", "--game", "Breakout", "--set", "seed=3"], "--seed"),
-    (["train", "ppo", "--game", "Breakout", "--steps", "0"], "total_steps"),
+    (["train", "ppo", "--game", "Breakout", "--steps", "0"], "--steps must be >= 1"),
     (["eval"], "--checkpoint PATH or --random"),
     (["eval", "--random", "--game", "Breakout"], "--game and --preset"),
     (["eval", "--checkpoint", "/nonexistent.pkl"], "does not exist"),
