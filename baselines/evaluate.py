@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from stori_jax.checks import check_int
+from stori_jax.suite import episode_quotas
 
 CHECKPOINT_POLICIES = ("sampled", "greedy")  # how a trained policy acts
 POLICIES = CHECKPOINT_POLICIES + ("random",)
@@ -35,11 +36,6 @@ def stori_game(name: str) -> str:
         raise ValueError(f"game must be one of the STORI games {list(stori_jax.STORI_GAMES)} "
                          f"(the baselines play the paper's presets), got {name!r}")
     return game
-
-
-def episode_quotas(episodes: int, num_envs: int) -> np.ndarray:
-    """How many episodes each env plays: ``episodes`` split as evenly as possible."""
-    return np.array([episodes // num_envs + (i < episodes % num_envs) for i in range(num_envs)])
 
 
 def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: int = 0,

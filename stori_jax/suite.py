@@ -21,25 +21,38 @@ def random_policy(num_actions: int):
                                                        jnp.int32))
 
 
+def episode_quotas(episodes: int, num_envs: int) -> np.ndarray:
+    """How many episodes each env plays: ``episodes`` split as evenly as possible (fixed
+    quotas, so that a sample of episodes does not favour the short ones)."""
+    return np.array([episodes // num_envs + (i < episodes % num_envs) for i in range(num_envs)])
+
+
 def play(env, obs, seed: int, *, max_steps: int, episodes: int | None = None,
          progress: str | None = None, policy=None) -> dict:
     """Step ``env`` from ``obs`` (its reset's) under ``policy(obs, key)`` (default: uniformly
-    random), keys from ``seed``, for ``max_steps`` agent steps or until ``episodes`` episodes
-    ended; count what happened."""
+    random), keys from ``seed``, for ``max_steps`` agent steps or until every env played its
+    quota of ``episodes`` (:func:`episode_quotas`; None: no quota); count what happened.  The
+    returns are those of the episodes within the quotas (all of them without ``episodes``)."""
     import jax
     from tqdm import tqdm
 
     policy = policy or random_policy(env.num_actions)
     key = jax.random.PRNGKey(seed)
+    quotas = (np.full(env.num_envs, np.iinfo(np.int64).max) if episodes is None
+              else episode_quotas(episodes, env.num_envs))
+    ended = np.zeros(env.num_envs, np.int64)
     returns, events, corrupted, slots, masked, switches, steps = [], 0, 0, 0, 0, 0, 0
     previous_concept = np.zeros(env.num_envs, np.int32)
-    bar = tqdm(total=max_steps, desc=progress, unit="step", disable=progress is None)
+    bar = tqdm(total=max_steps, desc=progress, unit="step", disable=progress is None,
+               leave=episodes is None)
     start = time.perf_counter()
-    while steps < max_steps and (episodes is None or len(returns) < episodes):
+    while steps < max_steps and (ended < quotas).any():
         key, k = jax.random.split(key)
         obs, _, terminated, truncated, info = env.step(policy(obs, k))
         done = np.asarray(terminated | truncated)
-        returns.extend(np.asarray(info["episode_return"])[done].tolist())
+        counted = done & (ended < quotas)
+        returns.extend(np.asarray(info["episode_return"])[counted].tolist())
+        ended += done
         events += int(np.asarray(info["event_fired"]).sum())
         flags = np.asarray(info["action_corrupted"])
         corrupted += int(flags.sum())
@@ -61,13 +74,14 @@ def play(env, obs, seed: int, *, max_steps: int, episodes: int | None = None,
 
 
 def run_preset(game: str, name: str, *, episodes: int, num_envs: int, max_steps: int,
-               seed: int, policy=None) -> dict:
-    """Play until ``episodes`` episodes ended (or ``max_steps`` agent steps)."""
+               seed: int, policy=None, progress: bool = False) -> dict:
+    """Play until every env played its quota of ``episodes`` (or ``max_steps`` agent steps)."""
     import stori_jax
 
     with stori_jax.make(game, name, num_envs=num_envs, seed=seed, obs="atari84") as env:
         obs, _ = env.reset()
-        stats = play(env, obs, seed, max_steps=max_steps, episodes=episodes, policy=policy)
+        stats = play(env, obs, seed, max_steps=max_steps, episodes=episodes, policy=policy,
+                     progress=f"{game} {name}" if progress else None)
     return dict(game=game, preset=name, definition=stori_jax.describe_preset(game, name),
                 **stats)
 
@@ -109,7 +123,8 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
     rows = []
     for game, name in tqdm(presets, desc="suite", unit="preset", disable=not progress):
         rows.append(run_preset(game, name, episodes=episodes, num_envs=num_envs,
-                               max_steps=max_steps, seed=seed, policy=policy))
+                               max_steps=max_steps, seed=seed, policy=policy,
+                               progress=progress))
         if gallery:
             contact_sheet(game, name, stori_jax.preset(game, name),
                           out / "gallery" / f"{game}-{name}.png", seed=seed)

@@ -14,10 +14,11 @@ import pytest
 
 import stori_jax
 from baselines import ppo
-from baselines.evaluate import episode_quotas, evaluate, write_result
+from baselines.evaluate import evaluate, write_result
 from baselines.table import (PAPER_RESULTS, aggregate, build_table, load_evaluations, markdown,
                              smoothed)
 from stori_jax.cli import main
+from stori_jax.suite import episode_quotas
 
 TINY = dict(game="Breakout", preset="1", network="tiny", num_envs=4, num_steps=16,
             num_minibatches=2, update_epochs=2, total_steps=192, checkpoint_every=1)

@@ -77,3 +77,31 @@ def test_show_and_record_without_a_preset_play_3_1_of_any_ale_py_game(tmp_path, 
 def test_bad_arguments(argv, message, capsys):
     assert main(argv) == 2
     assert message in capsys.readouterr().err
+
+
+class _TwoPaceEnv:
+    """Env 0 ends an episode (return 1) every step, env 1 (return 10) every 5th step."""
+
+    num_envs, num_actions = 2, 4
+
+    def __init__(self):
+        self.t = 0
+
+    def step(self, actions):
+        self.t += 1
+        done = np.array([True, self.t % 5 == 0])
+        info = dict(episode_return=np.where(done, [1.0, 10.0], 0.0), event_fired=np.zeros(2),
+                    action_corrupted=np.zeros((2, 1), bool), obs_masked=np.zeros(2, bool),
+                    concept=np.zeros(2, np.int32))
+        return np.zeros((2, 1)), np.zeros(2), done, np.zeros(2, bool), info
+
+
+def test_the_suite_plays_a_quota_of_episodes_per_env_not_the_first_to_end():
+    """8 episodes over 2 envs are 4 each: the mean does not favour the env whose episodes are
+    short (stopping at the first 8 episodes gave 8 of env 0's, a mean of 1)."""
+    from stori_jax.suite import play
+
+    stats = play(_TwoPaceEnv(), np.zeros((2, 1)), 0, max_steps=1000, episodes=8,
+                 policy=lambda obs, key: np.zeros(2, np.int32))
+    assert stats["episodes"] == 8 and stats["mean_return"] == 5.5
+    assert stats["agent_steps"] == 20  # env 1's fourth episode ends at step 20
