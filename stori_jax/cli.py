@@ -239,9 +239,10 @@ def build_parser() -> argparse.ArgumentParser:
                        help=PRESET_HELP + "; or --config; default 3.1")
         p.add_argument("--config", default=None, help="a reference-format JSON file instead")
         p.add_argument("--seed", type=int, default=0, help=SEED_HELP)
-        suffix = "png" if command == "show" else "gif"
+        suffix = PICTURE_SUFFIX[command][1:]
         p.add_argument("--out", type=Path, default=None,
-                       help=f"file to write (default <game>-<preset>.{suffix})")
+                       help=f"file to write, ending in .{suffix} (default <game>-<preset>.{suffix}, "
+                            f"or <game>-<config file name>.{suffix})")
         if command == "show":
             p.add_argument("--steps", type=int, default=200,
                            help="agent steps to play (or until the episode ends); the sheet "
