@@ -15,14 +15,23 @@ def require_at_least_one(parser: argparse.ArgumentParser, **options) -> None:
             parser.error(f"--{name.replace('_', '-')}: must be >= 1, got {value}")
 
 
-def stori_game_and_preset(parser: argparse.ArgumentParser, game: str, preset: str) -> str:
-    """The STORI game ``game`` names, spelt canonically, after checking it has ``preset``."""
-    import stori_jax
+def stori_games(parser: argparse.ArgumentParser, flag: str, names: list[str]) -> list[str]:
+    """The STORI games ``names`` name, spelt canonically ('breakout' is Breakout)."""
     from baselines.evaluate import stori_game
 
     try:
-        game = stori_game(game)
+        return [stori_game(name) for name in names]
+    except ValueError as error:
+        parser.error(f"{flag}: {error}")
+
+
+def stori_game_and_preset(parser: argparse.ArgumentParser, game: str, preset: str) -> str:
+    """The STORI game ``game`` names, spelt canonically, after checking it has ``preset``."""
+    import stori_jax
+
+    game = stori_games(parser, "--game", [game])[0]
+    try:
         stori_jax.preset(game, preset)
     except ValueError as error:
-        parser.error(str(error))
+        parser.error(f"--preset: {error}")
     return game

@@ -39,7 +39,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from _checks import require_at_least_one  # noqa: E402  (needs this folder on sys.path)
+from _checks import require_at_least_one, stori_games  # noqa: E402  (this folder)
 
 FRAME_SKIP = 4
 WINDOWS = 3  # each rate is the median over this many equal windows (the machine is noisy)
@@ -401,9 +401,8 @@ def _check_arguments(parser, args):
     if not args.seconds > 0:
         parser.error(f"--seconds must be > 0, got {args.seconds}")
     require_at_least_one(parser, batch=args.batch, workers=args.workers, sizes=args.sizes)
-    for game in args.games or ():
-        if game not in stori_jax.STORI_GAMES:
-            parser.error(f"--games: {game!r} is not one of {list(stori_jax.STORI_GAMES)}")
+    if args.games is not None:
+        args.games = stori_games(parser, "--games", args.games)
     names = sorted({p for _, p in stori_jax.list_presets()})
     for preset in args.presets or ():
         if preset not in names:

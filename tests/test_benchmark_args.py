@@ -19,13 +19,15 @@ def script(monkeypatch, name: str):
     ("throughput", ["--sizes", "8", "-1"], "--sizes: must be >= 1, got [8, -1]"),
     ("throughput", ["--workers", "0"], "--workers: must be >= 1"),
     ("throughput", ["--presets", "9.9"], "--presets: '9.9' is not one of"),
+    ("throughput", ["--games", "Breakout", "Pong"], "--games: game must be one of the STORI"),
     ("jax_stages", ["--sizes", "0"], "--sizes: must be >= 1, got [0]"),
     ("ppo_rollout", ["--repeats", "0"], "--repeats: must be >= 1, got 0"),
-    ("ppo_rollout", ["--preset", "2"], "unknown preset '2' for Breakout: allowed ['1', '2.1'"),
+    ("ppo_rollout", ["--preset", "2"],
+     "--preset: unknown preset '2' for Breakout: allowed ['1', '2.1'"),
     ("xla_rollout", ["--steps", "0"], "--steps: must be >= 1, got 0"),
-    ("xla_rollout", ["--game", "Pong"], "game must be one of the STORI games"),
+    ("xla_rollout", ["--game", "Pong"], "--game: game must be one of the STORI games"),
     ("xla_rollout", ["--game", "boxing", "--preset", "3.3"],
-     "unknown preset '3.3' for Boxing: allowed"),
+     "--preset: unknown preset '3.3' for Boxing: allowed"),
 ])
 def test_bad_arguments_are_usage_errors_naming_the_option(monkeypatch, capsys, tmp_path,
                                                           name, argv, message):
