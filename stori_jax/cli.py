@@ -66,23 +66,36 @@ def _cmd_run(args) -> int:
 
 def check_out(flag: str, path: Path, *, directory: bool) -> None:
     """Fail before any work starts if ``path`` cannot be the output ``directory`` (or file):
-    it, or the nearest of its parents that exists, is the wrong kind of thing."""
+    it, or the nearest of its parents that exists, is the wrong kind of thing, or nothing can
+    be written there."""
     path = Path(path)
     kind = "directory" if directory else "file"
     if path.exists():
         if path.is_dir() != directory:
             raise ValueError(f"{flag} {path} exists and is not a {kind}")
+        if directory:
+            _check_writable(flag, path, path)
+        else:
+            try:  # replaced by the command: it must open for writing (nothing is changed here)
+                open(path, "r+b").close()
+            except OSError as e:
+                raise ValueError(f"{flag} {path}: cannot write it ({e.strerror or e})") from None
         return
     for parent in path.parents:
         if parent.exists():
             if not parent.is_dir():
                 raise ValueError(f"{flag} {path}: {parent} is a file, not a directory")
-            try:  # what the command will do there: create an entry (removed at once)
-                tempfile.TemporaryDirectory(dir=parent).cleanup()
-            except OSError as e:
-                raise ValueError(f"{flag} {path}: cannot write in {parent} "
-                                 f"({e.strerror or e})") from None
+            _check_writable(flag, path, parent)
             return
+
+
+def _check_writable(flag: str, path: Path, directory: Path) -> None:
+    """Something can be created in ``directory`` (tried: a temporary folder, removed at once)."""
+    try:
+        tempfile.TemporaryDirectory(dir=directory).cleanup()
+    except OSError as e:
+        raise ValueError(f"{flag} {path}: cannot write in {directory} "
+                         f"({e.strerror or e})") from None
 
 
 def _selected_presets(games, presets):

@@ -69,6 +69,8 @@ def test_config_file_errors_name_the_file(argv, message, files, capsys):
     # a place nothing can be created in (it failed after the run, naming no flag)
     (["show", "Breakout", "3.1", "--out", "/proc/x.png"], "--out /proc/x.png: cannot write in /proc"),
     (["suite", "--out", "/proc/a/b"], "--out /proc/a/b: cannot write in /proc"),
+    (["suite", "--out", "/proc"], "--out /proc: cannot write in /proc"),  # an existing folder
+    (["show", "Breakout", "--out", "/proc/version.png"], "cannot write in /proc"),
 ])
 def test_unusable_out_paths_are_refused_up_front(argv, message, files, capsys):
     assert message in run_main(argv, files, capsys)
