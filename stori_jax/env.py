@@ -33,9 +33,6 @@ def emulator_seeds(seed: int, num_envs: int) -> list[int]:
             for i in range(num_envs)]
 
 
-# seeds feed 32-bit JAX keys and envpool's int32 seed: larger ones would alias smaller ones
-
-
 def resolve_config(game: str, preset: str | None, config: Config | None) -> Config:
     if preset is not None and config is not None:
         raise ValueError("pass either preset or config, not both")
@@ -395,7 +392,8 @@ class Env:
         Errors in the emulators (a dead worker, an action out of range, a stale handle or one
         of another env) surface as a ``jax.errors.JaxRuntimeError`` whose last line is the
         error; on an accelerator, when the step's results are read.  After an error inside a
-        scan, no handle is current: ``reset()``."""
+        scan, no handle is current: ``reset()``.  ``step`` holds the env weakly (JAX's caches
+        keep it forever): keep the env referenced while you step it, or its workers close."""
         from stori_jax import xla
 
         self._check_open()

@@ -5,7 +5,8 @@
 - ``channel_matrix`` / ``mutual_information``: the same for any replacement set and input
   distribution (e.g. BankHeist's replacements 0..9 of 18 actions).
 - ``empirical_action_information(intended, executed, n)``: a plug-in estimate of I(A; Ã) from
-  logged (intended, executed) pairs, e.g. from ``info["executed_action"]``.
+  logged (intended, executed) pairs, e.g. from ``info["executed_action"]`` (leave out the rows
+  where ``info["reset_step"]``: an env reset instead of stepped executed NOOPs, reported as 0).
 - ``next_state_variance(states)``: the spread of next states reached under a fixed action, the
   quantity of the paper's variance-calibration probe.
 

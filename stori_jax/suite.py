@@ -32,7 +32,8 @@ def play(env, obs, seed: int, *, max_steps: int, episodes: int | None = None,
     """Step ``env`` from ``obs`` (its reset's) under ``policy(obs, key)`` (default: uniformly
     random), keys from ``seed``, for ``max_steps`` agent steps or until every env played its
     quota of ``episodes`` (:func:`episode_quotas`; None: no quota); count what happened.  The
-    returns are those of the episodes within the quotas (all of them without ``episodes``)."""
+    returns are those of the episodes within the quotas (all of them without ``episodes``);
+    events, corruptions and masks are counted over every step played."""
     import jax
     from tqdm import tqdm
 

@@ -413,33 +413,46 @@ def test_at_frame_skip_1_an_observation_gets_one_mask_decision():
 
 
 @pytest.mark.parametrize("end_frame", [41, 43, 44])
-def test_without_autoreset_an_episode_that_ends_mid_step_shows_its_last_frame(end_frame):
+@pytest.mark.parametrize("layout", ["pooled", "pair"])
+def test_without_autoreset_an_episode_that_ends_mid_step_shows_its_last_frame(end_frame, layout):
     """autoreset=False and an episode truncated at frame 41, 43 or 44 (frames 1, 3 and 4 of the
     11th step): the final observation is the screen of the episode's last frame (beside a bare
     emulator), max-pooled with the frame before it only where the step played both (44). It
     was the previous step's screens (41) or one of them pooled with the last frame (43). A
-    restored snapshot from before that step gives the same observation."""
+    restored snapshot from before that step gives the same observation. 'pair': the screens
+    reach JAX unpooled (a per-frame crop, p = 1: the left half black) and env 0 is emulated
+    in this process, env 1 in a worker."""
     seed = 5
-    kw = dict(obs="raw", num_envs=1, seed=seed, max_episode_frames=end_frame, autoreset=False,
-              inline_envs=0)
-    ale = new_ale(get_game("Breakout").rom_id, emulator_seeds(seed, 1)[0])
-    ale.reset_game()
-    screens = []
-    for _ in range(end_frame):
-        ale.act(ale.getMinimalActionSet()[1])  # FIRE
-        screens.append(ale.getScreenRGB().copy())
-    expected = (np.maximum(screens[-2], screens[-1]) if end_frame % 4 == 0 else screens[-1])
-    fire = np.ones(1, np.int32)
-    env, restored = make("Breakout", **kw), make("Breakout", **kw)
+    mask = ObservationMask("crop", 1, 1.0) if layout == "pair" else None
+    num_envs = 2 if layout == "pair" else 1
+    kw = dict(obs="raw", num_envs=num_envs, seed=seed, max_episode_frames=end_frame,
+              autoreset=False, inline_envs=num_envs - 1, num_workers=1)
+    expected = []
+    for emulator_seed in emulator_seeds(seed, num_envs):
+        ale = new_ale(get_game("Breakout").rom_id, emulator_seed)
+        ale.reset_game()
+        screens = []
+        for _ in range(end_frame):
+            ale.act(ale.getMinimalActionSet()[1])  # FIRE
+            screens.append(ale.getScreenRGB().copy())
+        last = np.maximum(screens[-2], screens[-1]) if end_frame % 4 == 0 else screens[-1]
+        if mask is not None:
+            last[:, :80] = 0
+        expected.append(last)
+    fire = np.ones(num_envs, np.int32)
+    config = Config(observation=mask) if mask is not None else None
+    env, restored = make("Breakout", config, **kw), make("Breakout", config, **kw)
     try:
+        assert env.plan.frames_layout == layout
         env.reset()
         for _ in range(10):
             env.step(fire)
         restored.reset()
         restored.restore(env.snapshot())
-        obs, _, _, truncated, _ = env.step(fire)
-        assert truncated[0]
-        np.testing.assert_array_equal(np.asarray(obs)[0], expected)
+        obs, _, _, truncated, info = env.step(fire)
+        assert truncated.all()
+        np.testing.assert_array_equal(np.asarray(obs), np.stack(expected))
+        assert np.asarray(info["obs_masked"]).all() == (mask is not None)
         np.testing.assert_array_equal(np.asarray(restored.step(fire)[0]), np.asarray(obs))
     finally:
         env.close()

@@ -31,6 +31,7 @@ def buffer_specs(num_envs: int, frame_skip: int) -> dict[str, tuple[tuple[int, .
         "reset_first": ((b,), np.uint8),               # reset this env instead of stepping it
         # workers -> parent
         "frames": ((2, b) + SCREEN, np.uint8),         # the last two screens, slot-major
+        #                                                (one frame in both: see single_frame)
         "ram": ((b, RAM_SIZE), np.uint8),
         "reward": ((b,), np.float32),
         "terminated": ((b,), np.uint8),
