@@ -204,7 +204,7 @@ class Emulator:
                 break
         # one emulator frame makes the observation (both slots): frame_skip 1, or an episode
         # that ended before the step's last frame (the screens before it are not this step's)
-        single = skip == 1 or (done and keep_end and f < skip - 1)
+        single = skip == 1 or ends_early
         if spec.want_screens and single:
             self.frames[0] = self.frames[1]
         v["single_frame"][i] = single
