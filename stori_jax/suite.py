@@ -89,11 +89,13 @@ def run_preset(game: str, name: str, *, episodes: int, num_envs: int, max_steps:
 
 def table(rows: list[dict]) -> str:
     lines = ["| game | preset | definition | mean return | episodes | events fired | "
-             "corrupted actions | masked obs | env steps/s |", "|---|---|---|---|---|---|---|---|---|"]
+             "corrupted actions (of draws) | masked obs | env steps/s |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         mean = "-" if r["mean_return"] is None else f"{r['mean_return']:.1f}"
         lines.append(f"| {r['game']} | {r['preset']} | {r['definition']} | {mean} | "
-                     f"{r['episodes']} | {r['events_fired']} | {r['corrupted_actions']} | "
+                     f"{r['episodes']} | {r['events_fired']} | "
+                     f"{r['corrupted_actions']} ({r['corrupted_fraction']:.0%}) | "
                      f"{r['masked_fraction']:.0%} | {r['env_steps_per_s']:.0f} |")
     return "\n".join(lines) + "\n"
 

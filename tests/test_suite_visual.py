@@ -21,6 +21,8 @@ def test_suite_writes_table_json_and_gallery(tmp_path, capsys):
     assert masked["corrupted_actions"] == 0
     table = (out / "table.md").read_text()
     assert "| Breakout | 3.2A | blackout mode 10, p = 1.0 |" in table
+    noisy_row = next(line for line in table.splitlines() if line.startswith("| Breakout | 1 |"))
+    assert f"| {noisy['corrupted_actions']} ({noisy['corrupted_fraction']:.0%}) |" in noisy_row
     for name in ("1", "3.2A"):
         with Image.open(out / "gallery" / f"Breakout-{name}.png") as img:
             assert img.width > 300 and img.height > 400
