@@ -5,6 +5,11 @@ numpy) and ``gymnasium.make_vec`` (a gymnasium VectorEnv, autoreset mode NEXT_ST
     env = gym.make("stori_jax/Breakout-2.1-v0")
     envs = gym.make_vec("stori_jax/Breakout-2.1-v0", num_envs=8)
 
+``reset()`` without a seed is seed 0 (the env is reproducible by default); ``reset(seed=k)``
+makes it seed k's.  ``make_vec``'s default mode is the one that works: stori_jax steps its envs
+in its own worker processes, which gymnasium's ``"async"`` mode (daemonic processes) cannot
+start.
+
 Extra keyword arguments (``obs``, ``frame_skip``, ``granularity``, ``backend``, ``num_workers``,
 ``inline_envs``, ``max_episode_frames``, ``noop_max``) go to :func:`stori_jax.make`; the id fixes
 the game and the preset.  A config of your own (type 0 included) goes through the classes:
@@ -26,17 +31,22 @@ def env_id(game: str, preset: str) -> str:
     return f"{NAMESPACE}/{game}-{preset}-v0"
 
 
+def _numpy(x) -> np.ndarray:
+    """A writable numpy copy (``np.asarray`` of a JAX array is a read-only view)."""
+    return np.array(x)
+
+
 def _numpy_info(info: dict) -> dict:
     import jax
 
-    return jax.tree.map(np.asarray, info)
+    return jax.tree.map(_numpy, info)
 
 
 def _first_env_info(info: dict) -> dict:
     """The single env's info: env 0's entry of every batched leaf (``labels`` included)."""
     import jax
 
-    return jax.tree.map(lambda v: np.asarray(v)[0], info)
+    return jax.tree.map(lambda v: _numpy(v[0]), info)
 
 
 class _Owner:
@@ -66,15 +76,19 @@ class _Owner:
         self._seed = 0 if seed is None else seed
         self._env = self._make(self._seed)
         self._fresh = True  # no reset yet: the env is exactly as made from self._seed
+        self.closed = False
 
     def _reseed(self, seed):
         """An explicit seed restarts everything (emulators and key) from that seed."""
+        if self.closed:
+            from stori_jax.backends.subproc import EnvClosedError
+
+            raise EnvClosedError("this environment is closed; make a new one")
         if isinstance(seed, (list, tuple, np.ndarray)):
             raise ValueError(f"seed must be one int for all envs (env i's emulator seed derives "
                              f"from it and i); per-env seed lists are not supported, got {seed!r}")
         if seed is not None and not (self._fresh and seed == self._seed):
-            from stori_jax.checks import check_int
-            from stori_jax.checks import MAX_SEED
+            from stori_jax.checks import MAX_SEED, check_int
 
             check_int("seed", seed, 0, MAX_SEED)  # a refused seed leaves the env as it was
             self._env.close()
@@ -90,6 +104,7 @@ class _Owner:
     def close(self, **kwargs):
         if getattr(self, "_env", None) is not None:
             self._env.close()
+        self.closed = True  # a later reset(seed=...) must not make the env again
 
     def render(self):
         raise NotImplementedError("stori_jax envs do not render: `stori-jax record GAME PRESET` "
@@ -97,7 +112,9 @@ class _Owner:
 
 
 class StoriGymEnv(_Owner, gym.Env):
-    """One STORI env with gymnasium's single-env API (numpy outputs, no autoreset)."""
+    """One STORI env with gymnasium's single-env API (numpy outputs).  Call ``reset()`` after
+    an episode ends: a ``step()`` instead resets the env (the new episode's first observation,
+    reward 0, ``info["reset_step"]`` True), as the batched env's next-step autoreset does."""
 
     metadata = {"render_modes": []}
 
@@ -112,7 +129,7 @@ class StoriGymEnv(_Owner, gym.Env):
         self._reseed(seed)  # checks the seed before gymnasium's np_random takes it
         super().reset(seed=seed)
         obs, info = self._env.reset()
-        return np.asarray(obs[0]), _first_env_info(info)
+        return _numpy(obs[0]), _first_env_info(info)
 
     def step(self, action):
         a = np.asarray(action)
@@ -120,7 +137,7 @@ class StoriGymEnv(_Owner, gym.Env):
             raise ValueError(f"action must be one int in [0, {self.action_space.n - 1}], "
                              f"got {action!r}")
         obs, reward, terminated, truncated, info = self._env.step(a.reshape(1))
-        return (np.asarray(obs[0]), float(reward[0]), bool(terminated[0]), bool(truncated[0]),
+        return (_numpy(obs[0]), float(reward[0]), bool(terminated[0]), bool(truncated[0]),
                 _first_env_info(info))
 
 
@@ -141,13 +158,14 @@ class StoriVectorEnv(_Owner, VectorEnv):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         self._check_options(options)
         self._reseed(seed)
+        super().reset(seed=seed)  # np_random / np_random_seed, as gymnasium's vector envs
         obs, info = self._env.reset()
-        return np.asarray(obs), _numpy_info(info)
+        return _numpy(obs), _numpy_info(info)
 
     def step(self, actions):
         obs, reward, terminated, truncated, info = self._env.step(actions)
-        return (np.asarray(obs), np.asarray(reward), np.asarray(terminated),
-                np.asarray(truncated), _numpy_info(info))
+        return (_numpy(obs), _numpy(reward), _numpy(terminated), _numpy(truncated),
+                _numpy_info(info))
 
 
 def register_all() -> None:

@@ -155,3 +155,52 @@ def test_a_config_of_ones_own_through_the_adapter_classes():
     finally:
         env.close()
         envs.close()
+
+
+def test_vector_env_close_seeding_and_writable_outputs():
+    """closed is True after close() and no reset brings the env back (reset(seed=k) used to
+    start new workers); reset(seed=k) seeds np_random as gymnasium's vector envs do; outputs
+    are writable numpy arrays (in-place edits of rewards or obs raised 'read-only')."""
+    envs = gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, obs="ram")
+    obs, info = envs.reset(seed=3)
+    assert envs.np_random_seed == 3
+    obs, reward, terminated, truncated, info = envs.step(np.zeros(2, np.int64))
+    for array in (obs, reward, terminated, truncated, info["ram"], info["labels"]["score"]):
+        assert array.flags.writeable
+    reward[0] = 1.0
+    envs.close()
+    assert envs.closed
+    for seed in (None, 4):
+        with pytest.raises(stori_jax.EnvClosedError):
+            envs.reset(seed=seed)
+    single = gym.make("stori_jax/Breakout-3.1-v0", obs="ram")
+    obs, info = single.reset(seed=1)
+    assert obs.flags.writeable and info["ram"].flags.writeable
+    single.close()
+    with pytest.raises(stori_jax.EnvClosedError):
+        single.reset(seed=2)
+
+
+def _make_in_daemon(queue):
+    try:
+        stori_jax.make("Breakout", num_envs=1, seed=0, obs="ram")
+        queue.put("made")
+    except Exception as error:
+        queue.put(f"{type(error).__name__}: {error}")
+
+
+def test_making_an_env_inside_a_daemonic_process_says_why_it_cannot():
+    """gymnasium's async vector mode runs each env in a daemonic process, which Python forbids
+    to start the emulator workers: a clear error naming the way that works, not an assertion
+    from deep in multiprocessing followed by a broken pipe."""
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    queue = ctx.Queue()
+    process = ctx.Process(target=_make_in_daemon, args=(queue,), daemon=True)
+    process.start()
+    message = queue.get(timeout=120)
+    process.join(30)
+    assert message.startswith("RuntimeError: stori_jax.make cannot start its emulator worker "
+                              "processes inside a daemonic process"), message
+    assert "make_vec(id, num_envs=N) in its default mode" in message

@@ -106,6 +106,13 @@ class SubprocBackend:
                  per_frame: bool, event_mode: int | None, event_prob: float,
                  ram_obs_mode: int | None, want_screens: bool, max_episode_frames: int,
                  autoreset: bool = True, pool_screens: bool = False, inline_envs: int = 0):
+        if mp.current_process().daemon:  # Python forbids it; say why, and what works
+            raise RuntimeError(
+                "stori_jax.make cannot start its emulator worker processes inside a daemonic "
+                "process (gymnasium's make_vec(..., vectorization_mode='async'), a DataLoader "
+                "worker, SubprocVecEnv): make the batch in the main process, e.g. "
+                "gymnasium.make_vec(id, num_envs=N) in its default mode or stori_jax.make(..., "
+                "num_envs=N), which step their envs in their own workers")
         num_envs = len(seeds)
         self.frames_layout = "pooled" if pool_screens else "pair"
         self.max_episode_frames = max_episode_frames
