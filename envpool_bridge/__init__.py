@@ -11,7 +11,14 @@ envpool runs its own C++ thread pool and emulator build and does the frame skip 
 Anything else (2.1 events and RAM-obs modes write the RAM; ``frame`` granularity needs an action
 or a mask per emulator frame) raises ValueError naming what needs the ``subproc`` backend.
 Same seed -> same run on this backend too, but envpool ships its own emulator build and seeds it
-its own way, so runs are not bit-identical to the ``subproc`` backend.
+its own way, so runs are not bit-identical to the ``subproc`` backend.  envpool seeds env i with
+``base + i``; the base is hashed from the seed (:func:`envpool_seed`), so that runs of
+consecutive seeds share no env's emulator stream (with ``base = seed``, env i + 1 of seed s was
+env i of seed s + 1).
+
+An episode that ends before a step's last two frames: envpool stops its frame loop before
+taking the screens, so the final observation (``autoreset=False``) repeats the step before's;
+the ``subproc`` backend shows the episode's last frame.
 
 No-op starts: envpool plays at least one NOOP frame at every reset (its ``noop_max=N`` draws
 1..N frames), so this backend passes ``noop_max + 1`` and an episode starts after 1..noop_max+1
@@ -27,6 +34,12 @@ from stori_jax.backends.layout import SCREEN, buffer_specs
 from stori_jax.backends.subproc import EnvClosedError
 
 FRAMES_LAYOUT = "pooled_chw"  # (B, 3, 210, 160): envpool's max-pooled screen, channels first
+MAX_BASE_SEED = 2**30 - 1  # envpool's int32 seed: base + i stays below 2**31 for B < 2**30
+
+
+def envpool_seed(seed: int) -> int:
+    """envpool's seed (the base it adds env i to) for a stori_jax ``seed``: a hash of it."""
+    return int(np.random.SeedSequence([seed, 0xE27]).generate_state(1)[0]) & MAX_BASE_SEED
 
 
 def unsupported_reason(plan) -> str | None:
@@ -72,7 +85,7 @@ class EnvpoolBackend:
                              "use backend='subproc' (the default), which runs every ale-py game")
         b = plan.num_envs
         self.pool = envpool.make(
-            task, env_type="gymnasium", num_envs=b, batch_size=b, seed=seed,
+            task, env_type="gymnasium", num_envs=b, batch_size=b, seed=envpool_seed(seed),
             num_threads=0, img_height=SCREEN[0], img_width=SCREEN[1], gray_scale=False,
             stack_num=1, frame_skip=plan.frame_skip, noop_max=plan.noop_max + 1,
             episodic_life=False, reward_clip=False, repeat_action_probability=0.0,

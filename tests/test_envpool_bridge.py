@@ -167,3 +167,18 @@ def test_a_game_envpool_lacks_is_named(monkeypatch):
     with pytest.raises(ValueError, match="envpool has no Atari task 'Breakout-v5' for game "
                                          "'Breakout'; use backend='subproc'"):
         stori_jax.make("Breakout", num_envs=1, seed=0, **EP)
+
+
+def test_consecutive_seeds_share_no_emulator_stream():
+    """envpool seeds env i with base + i: with base = seed, env i + 1 of seed s replayed env i
+    of seed s + 1 (the same no-op starts). The base is now hashed from the seed."""
+    pytest.importorskip("envpool")
+
+    def reset_rams(seed):
+        with stori_jax.make("Breakout", config=stori_jax.Config(ram_observation=True),
+                            num_envs=4, seed=seed, noop_max=30, **EP) as env:
+            return np.asarray(env.reset()[0])
+
+    a, b = reset_rams(0), reset_rams(1)
+    assert not any(np.array_equal(a[i + 1], b[i]) for i in range(3))
+    np.testing.assert_array_equal(reset_rams(0), a)  # still the same run for the same seed
