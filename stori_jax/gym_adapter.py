@@ -83,7 +83,8 @@ class _Owner:
         if self.closed:
             from stori_jax.backends.subproc import EnvClosedError
 
-            raise EnvClosedError("this environment is closed; make a new one")
+            raise EnvClosedError("this environment is closed; make a new one with "
+                                 "gymnasium.make or gymnasium.make_vec")
         if isinstance(seed, (list, tuple, np.ndarray)):
             raise ValueError(f"seed must be one int for all envs (env i's emulator seed derives "
                              f"from it and i); per-env seed lists are not supported, got {seed!r}")
