@@ -35,15 +35,24 @@ KNOWN_KEYS = ("stochasticity_type",
               f"{_DRIFT}.temporal_mode", f"{_DRIFT}.temporal_threshold",
               f"{_DRIFT}.secondary_concept_type",
               f"{_OBS}.type", f"{_OBS}.mode", f"{_OBS}.prob")
-# the Config fields each key sets, as the errors of Config name them
+# the Config field each key sets, as the errors of Config name it: the part's own check
+# ("RandomEvent.mode") or the game's, by path ("Config[.drift.secondary].event.mode")
 _FIELD_KEYS = {"ActionNoise.prob": f"{_ACTION}.stochastic_action_prob",
-               "RandomEvent.mode": f"{_RANDOM}.mode", "Config.event.mode": f"{_RANDOM}.mode",
+               "RandomEvent.mode": f"{_RANDOM}.mode", "event.mode": f"{_RANDOM}.mode",
                "RandomEvent.prob": f"{_RANDOM}.random_stochasticity_prob",
                "ConceptDrift.period": f"{_DRIFT}.temporal_threshold",
-               "ObservationMask.mode": f"{_OBS}.mode", "Config.observation.mode": f"{_OBS}.mode",
-               "ObservationMask.prob": f"{_OBS}.prob",
-               "Config.drift.secondary.event.mode": f"{_RANDOM}.mode",
-               "Config.drift.secondary.observation.mode": f"{_OBS}.mode"}
+               "ObservationMask.mode": f"{_OBS}.mode", "observation.mode": f"{_OBS}.mode",
+               "ObservationMask.prob": f"{_OBS}.prob"}
+
+
+def _key_of(message: str) -> str | None:
+    """The reference key whose value a Config error ``message`` (starting with the field) is
+    about, if any."""
+    field_path = message.split(" ", 1)[0]
+    for field_name, key in _FIELD_KEYS.items():
+        if field_path == field_name or field_path.endswith("." + field_name):
+            return key
+    return None
 
 
 def flatten(d: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -163,8 +172,7 @@ def config_from_reference(d: Mapping[str, Any], game: str | None = None) -> Conf
             config = _concept(kind, r)
         return config.for_game(game) if game is not None else config
     except ValueError as error:  # name the key the user wrote, not only the Config field
-        message = str(error)
-        for field_name, key in _FIELD_KEYS.items():
-            if message.startswith(field_name):
-                raise ValueError(f"reference config {key!r}: {message}") from None
-        raise
+        key = _key_of(str(error))
+        if key is None:
+            raise
+        raise ValueError(f"reference config {key!r}: {error}") from None
