@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import datetime
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -100,6 +101,24 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def suite_outputs(out: Path) -> list[Path]:
+    """Every file a suite run can write in ``out``: its table, its JSON and each paper preset's
+    contact sheet."""
+    from stori_jax import list_presets
+
+    return [out / "table.md", out / "results.json"] + [
+        out / "gallery" / f"{game}-{name}.png" for game, name in list_presets()]
+
+
+def clear_previous_run(out: Path) -> list[Path]:
+    """Remove an earlier suite run's files from ``out`` (nothing else), so that a run on a
+    subset of the presets leaves no contact sheet beside a table that no longer lists it."""
+    found = [path for path in suite_outputs(out) if path.is_file()]
+    for path in found:
+        path.unlink()
+    return found
+
+
 def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: int,
               out: Path | None, gallery: bool, progress: bool = True,
               checkpoint: Path | None = None) -> Path:
@@ -123,6 +142,10 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
                              f"presets with --games {trained_on} (asked for {others})")
         agent = str(checkpoint)
     out.mkdir(parents=True, exist_ok=True)
+    replaced = clear_previous_run(out)
+    if replaced:
+        print(f"replaced an earlier suite run's {len(replaced)} files in {out}",
+              file=sys.stderr)
     rows = []
     for game, name in tqdm(presets, desc="suite", unit="preset", disable=not progress):
         rows.append(run_preset(game, name, episodes=episodes, num_envs=num_envs,

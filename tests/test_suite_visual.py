@@ -28,6 +28,24 @@ def test_suite_writes_table_json_and_gallery(tmp_path, capsys):
             assert img.width > 300 and img.height > 400
 
 
+def test_a_suite_run_replaces_an_earlier_runs_files_and_nothing_else(tmp_path, capsys):
+    out = tmp_path / "suite"
+    (out / "gallery").mkdir(parents=True)
+    stale = [out / "gallery" / "Boxing-2.1.png", out / "gallery" / "Breakout-3.2A.png",
+             out / "table.md", out / "results.json"]
+    mine = [out / "notes.txt", out / "gallery" / "my-plot.png"]
+    for path in stale + mine:
+        path.write_text("earlier")
+    assert main(["suite", "--games", "Breakout", "--presets", "1", "--episodes", "1",
+                 "--num-envs", "2", "--max-steps", "20", "--out", str(out), "--quiet",
+                 "--no-gallery"]) == 0
+    assert "replaced an earlier suite run's 4 files" in capsys.readouterr().err
+    assert not any(path.exists() for path in stale[:2])  # no sheet beside a table without it
+    assert all(path.read_text() == "earlier" for path in mine)
+    rows = json.loads((out / "results.json").read_text())["rows"]
+    assert [(r["game"], r["preset"]) for r in rows] == [("Breakout", "1")]
+
+
 def test_show_puts_the_mask_on_the_preset_side_only(tmp_path):
     path = tmp_path / "sheet.png"
     assert main(["show", "Breakout", "3.2A", "--steps", "20", "--out", str(path)]) == 0
