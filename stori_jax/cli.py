@@ -240,8 +240,9 @@ def build_parser() -> argparse.ArgumentParser:
     suite.add_argument("--checkpoint", type=Path, default=None,
                        help="play a trained PPO checkpoint's policy (sampled) instead of the "
                             "random one; it plays its own game's presets")
-    suite.add_argument("--out", type=Path, default=None, help="default results/suite-<date>; an earlier "
-                       "suite run's files there are replaced")
+    suite.add_argument("--out", type=Path, default=None,
+                       help="default results/suite-<date>; an earlier suite run's files there "
+                            "are replaced")
     suite.add_argument("--no-gallery", action="store_true")
     suite.add_argument("--quiet", action="store_true")
 
