@@ -9,6 +9,7 @@ Light to import: configuration and game tables load eagerly; the env, rollout an
 functions load on first use (the emulator workers import this package without JAX).
 """
 
+from stori_jax import fork_guard  # noqa: F401 - notes a fork after JAX started
 from stori_jax.config import (ActionNoise, Config, ConceptDrift, ObservationMask,  # noqa: F401
                               RandomEvent)
 from stori_jax.games import STORI_GAMES, get_game  # noqa: F401

@@ -19,6 +19,7 @@ from stori_jax.checks import MAX_INT32, MAX_SEED, check_int, check_real
 from stori_jax.config import Config, GRANULARITIES
 from stori_jax.core import (Draws, EnvState, WorkerOutputs, before_step, finish_step,
                             initial_state)
+from stori_jax.fork_guard import refuse_if_forked_after_jax
 from stori_jax.functional.preprocess import ATARI84, DREAMER64, STACK
 from stori_jax.games import get_game
 from stori_jax.plan import OBS_KINDS, Plan, compile_plan
@@ -61,8 +62,12 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
     ``num_workers`` emulator processes share the batch; ``inline_envs`` envs are emulated in
     this process itself while the workers run theirs.  By default (both None) there is one
     worker per core but one, and this process takes an equal share: every core emulates, and
-    nothing waits on a process switch (see benchmarks/README.md).
+    nothing waits on a process switch (see benchmarks/README.md).  ``num_workers=0`` starts no
+    process and emulates every env here, one after another inside ``recv()``; it is the default
+    inside a daemonic process (a DataLoader worker, gymnasium's async vector env), which may
+    have no children.  The split changes the speed only: a seed gives the same run with any.
     """
+    refuse_if_forked_after_jax("stori_jax.make")
     spec = get_game(game)
     cfg = resolve_config(game, preset, config)
     if cfg.game is not None and get_game(cfg.game) is not spec:
@@ -109,7 +114,17 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
         plan = dataclasses.replace(plan, frames_layout=FRAMES_LAYOUT)
         # raises a clear ValueError naming what needs the subproc backend
         return Env(plan, cfg, seed, make_envpool_backend(plan, seed, max_episode_frames))
-    if inline_envs is not None:  # every worker needs at least one env
+    if num_workers is None and _in_daemonic_process():
+        num_workers = 0  # it may start no processes: every env is emulated here
+    if num_workers is not None:
+        num_workers = check_int("num_workers", num_workers, 0)
+    if num_workers == 0:
+        if inline_envs not in (None, num_envs):
+            raise ValueError(f"num_workers=0 emulates all num_envs ({num_envs}) envs in this "
+                             f"process: leave inline_envs None or set it to {num_envs}, got "
+                             f"{inline_envs!r}")
+        inline_envs = num_envs
+    elif inline_envs is not None:  # every worker needs at least one env
         inline_envs = check_int("inline_envs", inline_envs, 0, num_envs - 1)
     if num_workers is None:
         num_workers, default_inline = default_split(num_envs, _available_cores())
@@ -118,7 +133,6 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
         else:  # the envs left to the workers bound how many there can be
             num_workers = min(num_workers, num_envs - inline_envs)
     inline_envs = inline_envs or 0
-    num_workers = check_int("num_workers", num_workers, 1)
     if num_workers > num_envs:
         raise ValueError(f"num_workers must be <= num_envs ({num_envs}), got {num_workers}")
     if num_workers + inline_envs > num_envs:
@@ -164,6 +178,12 @@ def default_split(num_envs: int, cores: int) -> tuple[int, int]:
         return 1, 0
     workers = min(cores - 1, num_envs - 1)
     return workers, num_envs // (workers + 1)
+
+
+def _in_daemonic_process() -> bool:
+    import multiprocessing
+
+    return multiprocessing.current_process().daemon
 
 
 def _available_cores() -> int:

@@ -376,7 +376,10 @@ def test_step_before_reset_and_send_recv_misuse():
     (dict(game="Breakout", obs="rgb"), r"obs must be one of \['raw', 'atari84', 'dreamer64', "
                                        r"'ram'\], got 'rgb'"),
     (dict(game="Breakout", num_envs=2, num_workers=3), r"num_workers must be <= num_envs \(2\)"),
-    (dict(game="Breakout", num_workers=0), r"num_workers must be >= 1"),
+    (dict(game="Breakout", num_workers=-1), r"num_workers must be >= 0, got -1"),
+    (dict(game="Breakout", num_envs=3, num_workers=0, inline_envs=1),
+     r"num_workers=0 emulates all num_envs \(3\) envs in this process: leave inline_envs None "
+     r"or set it to 3, got 1"),
     (dict(game="Breakout", num_envs=2, num_workers=2, inline_envs=1),
      r"num_workers \(2\) \+ inline_envs \(1\) must be <= num_envs \(2\)"),
     (dict(game="Breakout", num_envs=2, inline_envs=-1), r"inline_envs must be in \[0, 1\], got -1"),
@@ -522,6 +525,18 @@ def test_an_interrupted_reset_says_reset_again():
     finally:
         env.close()
         twin.close()
+
+
+def test_no_workers_emulates_every_env_in_this_process():
+    """num_workers=0 starts no process; the batch still steps, resets and snapshots."""
+    with make("Breakout", num_envs=3, num_workers=0) as env:
+        assert env.backend.pids == []
+        env.reset()
+        state = env.snapshot()
+        first = env.step(np.ones(3, np.int32))[0]
+        env.restore(state)
+        np.testing.assert_array_equal(np.asarray(env.step(np.ones(3, np.int32))[0]),
+                                      np.asarray(first))
 
 
 def test_inline_envs_alone_leaves_the_workers_the_rest(monkeypatch):

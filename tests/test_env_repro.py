@@ -76,6 +76,9 @@ def test_same_seed_is_bit_identical_across_runs_and_worker_counts(name):
     # some envs emulated in this process while one worker runs the others
     _assert_identical(first, _run(name, seed=7, num_workers=1, inline_envs=2),
                       f"{name}: 1 worker vs 1 worker + 2 inline envs")
+    # every env emulated in this process, no worker at all
+    _assert_identical(first, _run(name, seed=7, num_workers=0, inline_envs=NUM_ENVS),
+                      f"{name}: 1 worker vs no worker")
     # the run is genuinely random: every case corrupts actions, and some did in these steps
     assert first.stacked("action_corrupted").any(), name
     # and it crosses episode ends (truncated at 40 frames): autoresets, their no-ops and draws

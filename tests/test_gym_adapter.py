@@ -181,26 +181,76 @@ def test_vector_env_close_seeding_and_writable_outputs():
         single.reset(seed=2)
 
 
-def _make_in_daemon(queue):
+def _ram_digest(**kw) -> str:
+    import hashlib
+
+    h = hashlib.sha256()
+    with stori_jax.make("Breakout", "1", num_envs=2, seed=3, obs="ram", **kw) as env:
+        env.reset()
+        for t in range(12):
+            obs, reward, *_ = env.step(np.array([t % 4, 1]))
+            h.update(np.asarray(obs).tobytes() + np.asarray(reward).tobytes())
+    return h.hexdigest()
+
+
+def _make_in_daemon(queue, num_workers):
     try:
-        stori_jax.make("Breakout", num_envs=1, seed=0, obs="ram")
+        queue.put(_ram_digest(num_workers=num_workers))
+    except Exception as error:
+        queue.put(f"{type(error).__name__}: {error}")
+
+
+def _in_a_daemonic_process(num_workers) -> str:
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    queue = ctx.Queue()
+    process = ctx.Process(target=_make_in_daemon, args=(queue, num_workers), daemon=True)
+    process.start()
+    message = queue.get(timeout=120)
+    process.join(30)
+    return message
+
+
+def test_inside_a_daemonic_process_every_env_is_emulated_in_that_process():
+    """gymnasium's async vector mode (and a DataLoader worker) runs each env in a daemonic
+    process, which Python forbids to start processes: by default the env then starts no worker
+    and gives the same run; asked for workers, it says why it cannot and what works."""
+    assert _in_a_daemonic_process(None) == _ram_digest(num_workers=1)
+    message = _in_a_daemonic_process(1)
+    assert message.startswith("RuntimeError: stori_jax.make cannot start its 1 emulator worker "
+                              "process(es) inside a daemonic process"), message
+    assert "set it to 0 to emulate every env in this process" in message
+
+
+def _make_in_fork(queue):
+    try:
+        stori_jax.make("Breakout", num_envs=1, seed=0, obs="ram", num_workers=0)
         queue.put("made")
     except Exception as error:
         queue.put(f"{type(error).__name__}: {error}")
 
 
-def test_making_an_env_inside_a_daemonic_process_says_why_it_cannot():
-    """gymnasium's async vector mode runs each env in a daemonic process, which Python forbids
-    to start the emulator workers: a clear error naming the way that works, not an assertion
-    from deep in multiprocessing followed by a broken pipe."""
+def test_making_an_env_in_a_process_forked_after_jax_started_says_spawn():
+    """JAX's threads do not survive fork: an env made there hung at its first compilation."""
     import multiprocessing as mp
+    import warnings
 
-    ctx = mp.get_context("spawn")
+    import jax.numpy as jnp
+
+    jnp.zeros(2).block_until_ready()  # JAX has started here
+    ctx = mp.get_context("fork")
     queue = ctx.Queue()
-    process = ctx.Process(target=_make_in_daemon, args=(queue,), daemon=True)
-    process.start()
-    message = queue.get(timeout=120)
-    process.join(30)
-    assert message.startswith("RuntimeError: stori_jax.make cannot start its emulator worker "
-                              "processes inside a daemonic process"), message
-    assert "make_vec(id, num_envs=N) in its default mode" in message
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # JAX's own warning about the fork
+        process = ctx.Process(target=_make_in_fork, args=(queue,), daemon=True)
+        process.start()
+    try:
+        message = queue.get(timeout=60)
+    finally:
+        process.join(10)
+        if process.is_alive():  # the hang this test is about: do not leave it behind
+            process.kill()
+    assert message.startswith("RuntimeError: stori_jax.make cannot run in a process forked "
+                              "from one that had started JAX"), message
+    assert "vector_kwargs={'context': 'spawn'}" in message

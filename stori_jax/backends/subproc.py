@@ -44,7 +44,9 @@ class WorkersLate(TimeoutError):
 
 
 def split_batch(num_envs: int, num_workers: int) -> list[tuple[int, int]]:
-    """Contiguous [lo, hi) env ranges, as even as possible."""
+    """Contiguous [lo, hi) env ranges, as even as possible (none for no workers)."""
+    if num_workers == 0:
+        return []
     base, extra = divmod(num_envs, num_workers)
     bounds, lo = [], 0
     for w in range(num_workers):
@@ -106,20 +108,24 @@ class SubprocBackend:
                  per_frame: bool, event_mode: int | None, event_prob: float,
                  ram_obs_mode: int | None, want_screens: bool, max_episode_frames: int,
                  autoreset: bool = True, pool_screens: bool = False, inline_envs: int = 0):
-        if mp.current_process().daemon:  # Python forbids it; say why, and what works
-            raise RuntimeError(
-                "stori_jax.make cannot start its emulator worker processes inside a daemonic "
-                "process (gymnasium's make_vec(..., vectorization_mode='async'), a DataLoader "
-                "worker, SubprocVecEnv): make the batch in the main process, e.g. "
-                "gymnasium.make_vec(id, num_envs=N) in its default mode or stori_jax.make(..., "
-                "num_envs=N), which step their envs in their own workers")
         num_envs = len(seeds)
+        if num_workers and mp.current_process().daemon:  # Python forbids it: say what works
+            raise RuntimeError(
+                f"stori_jax.make cannot start its {num_workers} emulator worker process(es) "
+                "inside a daemonic process (gymnasium's make_vec(..., "
+                "vectorization_mode='async'), a DataLoader worker, SubprocVecEnv): leave "
+                "num_workers None or set it to 0 to emulate every env in this process, or make "
+                "the batch in the main process (gymnasium.make_vec(id, num_envs=N) in its default "
+                "mode, or stori_jax.make(..., num_envs=N))")
+        if num_workers == 0 and inline_envs != num_envs:
+            raise ValueError(f"num_workers=0 needs inline_envs = num_envs ({num_envs}), "
+                             f"got {inline_envs}")
         self.frames_layout = "pooled" if pool_screens else "pair"
         self.max_episode_frames = max_episode_frames
         ctx = mp.get_context("spawn")
         self.buffers = SharedBuffers.allocate(ctx, num_envs, frame_skip)
         self.views = self.buffers.views()
-        if not 0 <= inline_envs < num_envs:
+        if num_workers and not 0 <= inline_envs < num_envs:
             raise ValueError(f"inline_envs must be in [0, num_envs - 1], got {inline_envs}")
         self.ranges = [(lo + inline_envs, hi + inline_envs)
                        for lo, hi in split_batch(num_envs - inline_envs, num_workers)]
