@@ -13,10 +13,11 @@ from baselines.evaluate import CHECKPOINT_POLICIES, EVAL_NUM_ENVS
 def add_parsers(sub) -> None:
     train = sub.add_parser("train", help="train a baseline agent on a preset (PPO)")
     train.add_argument("agent", choices=["ppo"], help="the algorithm")
-    train.add_argument("--game", required=True)
-    train.add_argument("--preset", default="3.1")
-    train.add_argument("--seed", type=int, default=0)
-    train.add_argument("--steps", type=int, default=100_000, help="agent steps in total")
+    train.add_argument("--game", required=True, help="Breakout, Boxing, Gopher or BankHeist")
+    train.add_argument("--preset", default="3.1", help="paper preset (default 3.1)")
+    train.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
+    train.add_argument("--steps", type=int, default=100_000,
+                       help="agent steps in total (default 100000)")
     train.add_argument("--out", type=Path, default=None,
                        help="run directory (default results/train/<game>-<preset>/ppo-seed<S>)")
     train.add_argument("--resume", action="store_true",
@@ -25,19 +26,20 @@ def add_parsers(sub) -> None:
                        metavar="FIELD=VALUE", help="any PPO hyperparameter, e.g. network=nips")
     train.add_argument("--eval-episodes", type=int, default=0,
                        help="evaluate the final policy for this many episodes (0: not now)")
-    train.add_argument("--quiet", action="store_true")
+    train.add_argument("--quiet", action="store_true", help="no progress bar")
 
     ev = sub.add_parser("eval", help="the evaluation protocol: N episodes of a checkpoint's "
                                      "policy (or the random policy) on its preset")
     ev.add_argument("--checkpoint", type=Path, default=None, help="a PPO checkpoint.pkl")
     ev.add_argument("--random", action="store_true", help="the uniformly random policy instead "
                                                           "(needs --game and --preset)")
-    ev.add_argument("--game", default=None)
-    ev.add_argument("--preset", default=None)
+    ev.add_argument("--game", default=None, help="with --random: the game")
+    ev.add_argument("--preset", default=None, help="with --random: the paper preset")
     ev.add_argument("--seed", type=int, default=None,
                     help="training seed the result is filed under (default: the checkpoint's; "
                          "0 for --random)")
-    ev.add_argument("--episodes", type=int, default=100)
+    ev.add_argument("--episodes", type=int, default=100,
+                    help="whole episodes to play (default 100, the paper's protocol)")
     ev.add_argument("--policy", choices=list(CHECKPOINT_POLICIES), default=None,
                     help="how a checkpoint acts (default sampled)")
     ev.add_argument("--eval-seed", type=int, default=None,
@@ -50,14 +52,15 @@ def add_parsers(sub) -> None:
                          "results/train/<game>-<preset>/random-seed<S>)")
     ev.add_argument("--force", action="store_true",
                     help="replace an existing eval-<policy>.json in --out")
-    ev.add_argument("--quiet", action="store_true")
+    ev.add_argument("--quiet", action="store_true", help="no progress bar")
 
     table = sub.add_parser("table", help="aggregate evaluations into the paper's table and plot "
                                          "learning curves")
-    table.add_argument("results_dir", type=Path)
+    table.add_argument("results_dir", type=Path,
+                       help="a folder of runs (<game>-<preset>/<agent>-seed<S>/eval-*.json)")
     table.add_argument("--out", type=Path, default=None, help="default: RESULTS_DIR")
     table.add_argument("--policy", choices=list(CHECKPOINT_POLICIES), default="sampled",
-                       help="which PPO evaluation the table shows")
+                       help="which PPO evaluation the table shows (default sampled)")
 
 
 def _parse_overrides(items: list[str]) -> dict[str, str]:

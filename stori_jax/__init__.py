@@ -27,6 +27,7 @@ _LAZY = {
     "EnvClosedError": ("stori_jax.backends.subproc", "EnvClosedError"),
     "InterruptedStepError": ("stori_jax.backends.subproc", "InterruptedStepError"),
     "functional": ("stori_jax.functional", None),
+    "metrics": ("stori_jax.metrics", None),
 }
 
 __all__ = ["ActionNoise", "Config", "ConceptDrift", "ObservationMask", "RandomEvent",

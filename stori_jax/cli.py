@@ -1,6 +1,6 @@
-"""The ``stori-jax`` command line: ``run`` a preset with a random policy, ``suite`` over every
-preset, ``show`` / ``record`` pictures of a preset, ``list`` what exists; ``train`` a PPO
-baseline, ``eval`` it (or the random policy) by the paper's protocol, ``table`` the results."""
+"""The stori-jax command line: run a preset with a random policy, suite over every preset,
+show / record pictures of a preset, list what exists; train a PPO baseline, eval it (or the
+random policy) by the paper's protocol, table the results."""
 
 from __future__ import annotations
 
@@ -224,27 +224,31 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--num-workers", type=int, default=None,
                      help="emulator worker processes (default: from the machine's cores)")
     run.add_argument("--seed", type=int, default=0, help=SEED_HELP)
-    run.add_argument("--obs", default=None, choices=list(OBS_KINDS))
-    run.add_argument("--granularity", default=None, choices=list(GRANULARITIES))
+    run.add_argument("--obs", default=None, choices=list(OBS_KINDS),
+                     help="observation (default atari84; ram for type 0)")
+    run.add_argument("--granularity", default=None, choices=list(GRANULARITIES),
+                     help="perturbations per emulator frame or per agent step (default: the "
+                          "preset's, frame)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
     suite = sub.add_parser("suite", help="every paper preset with a random agent (or a PPO "
                                          "checkpoint's): table, JSON, gallery")
     suite.add_argument("--games", nargs="+", default=None, help="a subset of the games")
     suite.add_argument("--presets", nargs="+", default=None, help="a subset of preset names")
-    suite.add_argument("--episodes", type=int, default=8, help="episodes per preset")
-    suite.add_argument("--num-envs", type=int, default=8)
+    suite.add_argument("--episodes", type=int, default=8, help="episodes per preset (default 8)")
+    suite.add_argument("--num-envs", type=int, default=8,
+                       help="envs stepped together (default 8)")
     suite.add_argument("--max-steps", type=int, default=2500,
-                       help="agent steps per preset at most (if episodes are long)")
-    suite.add_argument("--seed", type=int, default=0)
+                       help="agent steps per preset at most, if episodes are long (default 2500)")
+    suite.add_argument("--seed", type=int, default=0, help=SEED_HELP)
     suite.add_argument("--checkpoint", type=Path, default=None,
                        help="play a trained PPO checkpoint's policy (sampled) instead of the "
                             "random one; it plays its own game's presets")
     suite.add_argument("--out", type=Path, default=None,
                        help="default results/suite-<date>; an earlier suite run's files there "
                             "are replaced")
-    suite.add_argument("--no-gallery", action="store_true")
-    suite.add_argument("--quiet", action="store_true")
+    suite.add_argument("--no-gallery", action="store_true", help="no contact sheets")
+    suite.add_argument("--quiet", action="store_true", help="no progress bars")
 
     for command, helptext in (("show", "PNG contact sheet: the preset beside its 3.1 twin"),
                               ("record", "animated GIF of an episode with per-step overlay")):

@@ -166,3 +166,14 @@ def test_next_state_variance_is_zero_without_noise_and_grows_with_events():
     assert (spread(stori_jax.Config()) == 0).all()
     noisy = spread(stori_jax.Config(event=stori_jax.RandomEvent(mode=3, prob=0.05)))
     assert noisy[-1] > 0
+
+
+def test_the_metrics_module_is_an_attribute_of_the_package():
+    """``stori_jax.metrics``, as the README writes it, after a plain ``import stori_jax`` (in a
+    fresh interpreter: this module's own import of it would hide a missing attribute)."""
+    import subprocess
+    import sys
+
+    code = "import stori_jax; print(stori_jax.metrics.action_channel_capacity(4, 0.0))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert float(out.stdout) == pytest.approx(2.0)
