@@ -325,6 +325,43 @@ def test_table_aggregates_seeds_beside_the_paper(tmp_path):
     assert len(PAPER_RESULTS) == 24
 
 
+def test_paper_results_are_the_spec_table():
+    """STORI_SPEC section 11, typed in from the spec (every row, DreamerV3 mean ± std and STORM
+    mean ± std), against the table the results are printed beside."""
+    spec = """
+        Breakout 1 8.67 0.30 9.20 1.72
+        Breakout 2.1 13.80 3.26 16.44 2.03
+        Breakout 2.2 14.86 1.74 20.45 2.92
+        Breakout 3.1 60.71 41.89 24.17 3.55
+        Breakout 3.2A 10.65 0.41 12.05 0.89
+        Breakout 3.2B 3.57 1.43 6.48 2.50
+        Breakout 3.2C 1.89 0.49 3.96 1.42
+        Boxing 1 39.32 6.79 29.48 15.41
+        Boxing 2.1 43.00 31.98 54.69 20.44
+        Boxing 2.2 42.21 35.54 22.44 3.54
+        Boxing 3.1 84.22 1.68 86.18 11.29
+        Boxing 3.2A 86.90 1.33 85.22 11.77
+        Boxing 3.2B 61.74 17.71 45.41 26.56
+        Boxing 3.2C 56.52 18.45 52.66 25.68
+        Gopher 1 1137.00 56.98 1303.53 724.76
+        Gopher 2.1 11333.53 14761.12 950.67 188.37
+        Gopher 2.2 2190.87 407.24 2315.40 893.32
+        Gopher 3.1 3235.27 443.51 3811.67 2431.85
+        Gopher 3.2 1521.13 451.45 936.40 106.83
+        BankHeist 1 197.63 20.76 128.03 31.41
+        BankHeist 2.1 663.60 587.85 467.80 507.74
+        BankHeist 2.2 682.67 476.90 267.70 295.86
+        BankHeist 3.1 562.30 320.74 1015.73 148.43
+        BankHeist 3.2 849.80 514.15 43.10 22.85
+    """
+    expected = {}
+    for line in spec.strip().splitlines():
+        game, preset, *numbers = line.split()
+        expected[(game, preset)] = tuple(float(x) for x in numbers)
+    assert len(expected) == 24
+    assert PAPER_RESULTS == expected
+
+
 def test_table_errors(tmp_path):
     with pytest.raises(ValueError, match="no eval"):
         load_evaluations(tmp_path)

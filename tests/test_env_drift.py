@@ -122,6 +122,31 @@ def test_drift_to_an_event_keeps_the_episode_start_ram():
     np.testing.assert_array_equal(blocks[T + 1:], np.broadcast_to(start, blocks[T + 1:].shape))
 
 
+def test_previous_ram_is_tracked_while_a_drifted_event_is_off():
+    """'Previous RAM' is the RAM before the current frame, also while concept 1 has the event
+    switched off.  Breakout, sudden T = 150 to block-hit cancel (mode 1, p = 1, per frame), a
+    ball-tracking policy: the blocks hit in concept 1 stay gone, and from step T on every further
+    hit is undone, so the block RAM stays what it was at the switch.  (With the previous RAM
+    frozen at the reset while the event was off, the first frame of step T saw every block hit
+    in concept 1 as a change of that frame and wrote them all back.)"""
+    T, steps = 150, 170
+    config = drift("sudden", T, Config(event=RandomEvent(1, 1.0)))
+    env = make("Breakout", config)
+    try:
+        run = run_lockstep([env], steps, lambda k, runs: breakout_tracker(last_ram(runs[0])))[0]
+    finally:
+        env.close()
+    assert not run.done.any()
+    np.testing.assert_array_equal(run.stacked("concept"),
+                                  np.repeat((np.arange(steps) >= T)[:, None], 2, 1))
+    start, blocks = run.reset_info["ram"][:, :36], run.ram[:, :, :36]  # ram[k + 1]: after step k
+    assert ((blocks[T] != start).sum(-1) >= 2).all(), "the tracker should have hit blocks"
+    fired = run.stacked("event_fired")
+    assert not fired[:T].any()
+    assert fired[T:].any(), "a hit after the switch should have been undone"
+    np.testing.assert_array_equal(blocks[T:], np.broadcast_to(blocks[T], blocks[T:].shape))
+
+
 def test_make_granularity_overrides_a_drift_secondary_s_too():
     """``make(granularity=...)`` overrides the config's: concept 2's own field included (it
     refused a secondary set to 'step', telling the user to set a field they had not passed)."""

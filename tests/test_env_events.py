@@ -7,6 +7,8 @@ the reward, mostly by comparing with a 3.1 twin (same seed, same actions).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -57,6 +59,25 @@ def test_always_applicable_event_fires_at_rate_p(game, mode, granularity):
     assert fired.min() >= 0 and fired.max() <= draws_per_step
     n = steps * 2 * draws_per_step
     assert binomial_ok(int(fired.sum()), n, p), (fired.sum(), n * p)
+
+
+@pytest.mark.parametrize("game,mode", [("Boxing", 3), ("BankHeist", 3)])
+def test_frame_granularity_draws_each_frame_s_event_on_its_own(game, mode):
+    """Frame granularity, frame_skip 4, an always-applicable event (Boxing displace: before the
+    frame; BankHeist city switch: after it): each emulator frame has its own draw, so a step's
+    firings are Binomial(4, p), each count 0..4 at its own rate.  (One draw shared by a step's
+    frames fired 0 or 4 times, never 1..3, at the same mean rate.)"""
+    p, frame_skip, steps = 0.5, 4, 150
+    env = make(game, event(mode, p), frame_skip=frame_skip)
+    try:
+        run = run_env(env, random_actions(18, steps, 2, seed=7))
+    finally:
+        env.close()
+    fired = run.stacked("event_fired").ravel()
+    n = fired.size
+    for k in range(frame_skip + 1):
+        expected = math.comb(frame_skip, k) * p ** k * (1 - p) ** (frame_skip - k)
+        assert binomial_ok(int((fired == k).sum()), n, expected), (k, np.bincount(fired))
 
 
 def test_event_at_p0_never_fires_and_changes_nothing():
@@ -153,6 +174,48 @@ def test_boxing_colour_flip_swaps_player_and_enemy_colours_on_alternate_frames()
         # every changed pixel swapped white <-> black, and both boxers changed colour
         np.testing.assert_array_equal(diff, white_to_black | black_to_white, err_msg=f"step {k}")
         assert white_to_black.sum() > 50 and black_to_white.sum() > 50, k
+
+
+def boxing_colours_swapped(e, t):
+    """True: the max-pooled screen ``e`` is the twin's ``t`` with the white and black boxers
+    (scores included) swapped; False: ``e`` is ``t``; otherwise an AssertionError.  (Pooled
+    over two frames, a moving white boxer also leaves white where the twin shows the ring.)"""
+    white, black, ring = (214, 214, 214), (0, 0, 0), (110, 156, 66)
+    diff = (e != t).any(-1)
+    if not diff.any():
+        return False
+    is_white = lambda s: (s == white).all(-1)
+    dark = lambda s: (s == black).all(-1) | (s == ring).all(-1)
+    np.testing.assert_array_equal(diff, diff & ((is_white(t) & dark(e)) | (dark(t) & is_white(e))))
+    white_to_black = diff & is_white(t) & (e == black).all(-1)
+    black_to_white = diff & (t == black).all(-1) & is_white(e)
+    assert white_to_black.sum() > 50 and black_to_white.sum() > 50
+    return True
+
+
+@pytest.mark.parametrize("granularity,p", [("frame", 0.05), ("step", 0.3)])
+def test_boxing_colour_flip_persists_and_is_written_before_every_frame(granularity, p):
+    """Mode 1 at frame_skip 4 (the game rewrites RAM 1 and 2 itself every frame): the flag
+    persists between toggles, and its colours are written before EVERY emulator frame, at step
+    granularity too (one toggle decision per step, the writes before each of its 4 frames).
+    So the observation (max of frames 3 and 4) shows the boxers swapped exactly while the number
+    of toggles so far is odd: on every step at step granularity (the toggle is decided before
+    frame 1), and on the steps without a toggle at frame granularity.  (Writing only before a
+    step's first frame, or only on the frame that toggles, showed the game's own colours.)"""
+    steps = 60
+    actions = random_actions(18, steps, 1, seed=6)
+    ev, twin = lockstep_with_twin("Boxing", event(1, p, granularity), steps,
+                                  lambda k, runs: actions[k], num_envs=1, obs="raw")
+    np.testing.assert_array_equal(ev.ram, twin.ram)
+    fired = ev.stacked("event_fired")[:, 0]
+    flipped = np.cumsum(fired) % 2 == 1  # after step k
+    known = fired == 0 if granularity == "frame" else np.ones(steps, bool)
+    assert fired.max() <= (4 if granularity == "frame" else 1)
+    # enough steps shown flipped without a toggle in them, and normal after a toggle
+    assert (flipped & (fired == 0)).sum() >= 5 and (~flipped & known).sum() >= 5, fired
+    for k in np.nonzero(known)[0]:
+        assert boxing_colours_swapped(ev.obs[k][0], twin.obs[k][0]) == flipped[k], (
+            f"step {k}: {fired[:k + 1].sum()} toggles so far")
 
 
 @pytest.mark.parametrize("granularity", ["frame", "step"])

@@ -394,6 +394,23 @@ def test_mask_at_frame_granularity_applies_to_each_pooled_screen_with_probabilit
     assert not binomial_ok(int(masked.sum()), masked.size, p), "one draw per step would be p"
 
 
+def test_ram_mode_at_frame_granularity_renders_each_pooled_screen_with_probability_p():
+    """A RAM-obs mode at frame granularity: each of the two screens max-pooled into a step's
+    observation gets its own render decision, so the observation shows the mode with prob
+    1 - (1 - p)^2.  Boxing hide enemy (mode 2): the black boxer is gone from the pooled ring
+    exactly when obs_masked (one hidden screen suffices: max(black, ring) is the ring).  (One
+    decision shared by both screens rendered with prob p.)"""
+    steps, p = 200, 0.5
+    run = masked_run("Boxing", ObservationMask("ram", 2, p), steps=steps, granularity="frame")
+    assert_same_game(run, twin_run("Boxing", steps=steps))
+    obs, masked = run.stacked("obs"), run.stacked("obs_masked")  # the steps' (not the resets')
+    ring = (slice(None), slice(None), slice(37, 176), slice(33, 127))
+    enemy_shown = (obs[ring] == 0).all(-1).sum(axis=(-2, -1)) > 20
+    np.testing.assert_array_equal(enemy_shown, ~masked)
+    assert binomial_ok(int(masked.sum()), masked.size, 1 - (1 - p) ** 2)
+    assert not binomial_ok(int(masked.sum()), masked.size, p), "one decision per step would be p"
+
+
 def test_at_frame_skip_1_an_observation_gets_one_mask_decision():
     """frame_skip 1: each observation is one emulator frame, masked with probability p (the
     spec's per-frame rate) and wholly when masked. (Two decisions on the one frame in both

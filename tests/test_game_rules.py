@@ -221,6 +221,17 @@ def test_breakout_ram_obs():
     assert breakout.RAM_OBS[2].writes(make_ram({99: 50, 101: 60})) == {99: 0, 101: 0}
 
 
+def test_breakout_nus_pattern_has_the_spec_values():
+    """STORI_SPEC section 5, RAM mode 1, typed in from the spec (not the library's copy): these
+    29 block bytes and no others, whatever the current RAM."""
+    spec = {0: 62, 1: 61, 2: 60, 3: 62, 5: 60, 6: 240, 7: 127, 8: 120, 9: 112, 10: 119, 11: 120,
+            12: 0, 13: 240, 14: 240, 15: 240, 16: 240, 17: 240, 18: 57, 19: 218, 20: 219,
+            21: 219, 22: 219, 23: 219, 24: 239, 25: 239, 26: 238, 27: 237, 28: 235, 29: 231}
+    rng = np.random.default_rng(0)
+    for ram in (make_ram(), rng.integers(0, 256, 128, dtype=np.uint8)):
+        assert breakout.RAM_OBS[1].writes(ram) == spec
+
+
 def test_boxing_ram_obs():
     ram = make_ram({1: 10, 2: 20, 3: 30})
     assert boxing.RAM_OBS[1].writes(ram) == {3: 214}
