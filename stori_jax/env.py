@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import functools
+import os
 import time
 
 import gymnasium as gym
@@ -12,7 +13,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from stori_jax.backends.layout import RAM_SIZE, SCREEN
+from stori_jax.backends.interrupts import interrupts_deferred
+from stori_jax.backends.layout import RAM_SIZE, SCREEN, shared_bytes
 from stori_jax.backends.subproc import (EnvClosedError, InterruptedStepError, SubprocBackend,
                                         WorkersLate)
 from stori_jax.checks import MAX_INT32, MAX_SEED, check_int, check_real
@@ -89,6 +91,8 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
     frame_skip = check_int("frame_skip", frame_skip, 1)
     max_episode_frames = check_int("max_episode_frames", max_episode_frames, 1, MAX_INT32)
     noop_max = check_int("noop_max", noop_max, 0, MAX_INT32 - 1)
+    if backend == "subproc":
+        check_memory(num_envs, frame_skip)
     if obs is None:
         obs = "ram" if cfg.ram_observation else "atari84"
     if obs not in OBS_KINDS:
@@ -180,6 +184,22 @@ def default_split(num_envs: int, cores: int) -> tuple[int, int]:
     return workers, num_envs // (workers + 1)
 
 
+def check_memory(num_envs: int, frame_skip: int) -> None:
+    """Refuse a batch whose shared buffers alone would not fit in this machine's memory, before
+    anything is allocated (a typo of num_envs would otherwise allocate for minutes, then fail
+    deep inside multiprocessing)."""
+    need = shared_bytes(num_envs, frame_skip)
+    try:
+        have = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):  # not known here: nothing to compare with
+        return
+    if need > have:
+        raise ValueError(f"num_envs={num_envs} with frame_skip={frame_skip} needs "
+                         f"{need / 2**30:.1f} GiB of shared buffers (about "
+                         f"{shared_bytes(1, frame_skip) / 2**10:.0f} KiB per env), more than "
+                         f"this machine's {have / 2**30:.1f} GiB: choose a smaller num_envs")
+
+
 def _in_daemonic_process() -> bool:
     import multiprocessing
 
@@ -187,8 +207,6 @@ def _in_daemonic_process() -> bool:
 
 
 def _available_cores() -> int:
-    import os
-
     try:
         return len(os.sched_getaffinity(0))
     except AttributeError:
@@ -199,6 +217,15 @@ def observation_space(plan: Plan) -> gym.spaces.Box:
     shape = {"raw": SCREEN, "atari84": (ATARI84, ATARI84, STACK),
              "dreamer64": (DREAMER64, DREAMER64, 3), "ram": (RAM_SIZE,)}[plan.obs]
     return gym.spaces.Box(0, 255, (plan.num_envs,) + shape, np.uint8)
+
+
+# recv/step/reset(timeout=...) at most: the workers' pipes are waited on in int32 milliseconds
+# (2^31 ms is 24.8 days), so a longer finite wait cannot be honoured; None waits forever
+MAX_TIMEOUT_S = 1_000_000
+
+NOT_COPIED = ("a stori_jax.Env owns its emulator worker processes and cannot be copied or "
+              "pickled: env.snapshot() is picklable, and env.restore(snapshot) continues it in "
+              "an env made with the same arguments")
 
 
 class Env:
@@ -239,7 +266,9 @@ class Env:
     # -- lifecycle ------------------------------------------------------------------------------
 
     def close(self) -> None:
-        if self._xla_driven and not self.closed:
+        """Stop the workers.  In a process forked from the one that made the env, only this
+        process's copy closes: the workers are the other process's."""
+        if self._xla_driven and not self.closed and not self._made_elsewhere():
             jax.effects_barrier()  # xla steps still queued finish first
         self.backend.close()
 
@@ -258,7 +287,25 @@ class Env:
         if backend is not None:
             backend.close()
 
+    def __copy__(self):
+        raise TypeError(NOT_COPIED)
+
+    def __deepcopy__(self, memo):
+        raise TypeError(NOT_COPIED)
+
+    def __reduce__(self):
+        raise TypeError(NOT_COPIED)
+
+    def _made_elsewhere(self) -> bool:
+        owner = getattr(self.backend, "owner_pid", None)
+        return owner is not None and owner != os.getpid()
+
     def _check_open(self):
+        if self._made_elsewhere():
+            raise RuntimeError(
+                f"this env was made in process {self.backend.owner_pid}, and this process "
+                f"({os.getpid()}) was forked from it: its workers answer that process only. "
+                "Make an env in this process (started with the 'spawn' method)")
         if self.closed:
             raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
 
@@ -300,7 +347,7 @@ class Env:
         before anything is sent, so a refused timeout changes nothing."""
         if timeout is None:
             return None
-        timeout = check_real("timeout", timeout, 0)
+        timeout = check_real("timeout", timeout, 0, MAX_TIMEOUT_S)
         if not getattr(self.backend, "RECV_TIMEOUT", False):
             raise ValueError(f"{call}(timeout=...) needs backend='subproc': "
                              f"{type(self.backend).__name__} cannot bound its wait")
@@ -348,14 +395,25 @@ class Env:
                                "using it, or call reset() to step the env from Python again")
         if self._in_flight is not None:
             raise RuntimeError("a step is already in flight: call recv() before send() again")
+        self._check_backend_idle()
         a = self.validate_actions(actions)
         if self._deterministic_before_step:
             state, draws = self._state, self._host_draws(a)
         else:
             state, draws = before_step(self._jit_plan, self._state, a)
         self._write_inputs(draws, reset_first=self._reset_pending)
-        self.backend.send_step()
-        self._in_flight = (state, draws, self._reset_pending.copy())
+        with interrupts_deferred():  # the workers have the step, and this env knows it
+            self.backend.send_step()
+            self._in_flight = (state, draws, self._reset_pending.copy())
+
+    def _check_backend_idle(self) -> None:
+        """This env has nothing in flight: neither may its workers.  An interrupted snapshot
+        (or any call stopped while the workers owed a reply) leaves them busy; reset() waits
+        for them."""
+        if getattr(self.backend, "pending", False):
+            self._needs_reset = True
+            raise RuntimeError("the workers are still busy with a call that was interrupted: "
+                               "call reset(), which waits for them first")
 
     def recv(self, timeout: float | None = None):
         """Finish the step started by :meth:`send`: (obs, reward, terminated, truncated, info).
@@ -363,11 +421,14 @@ class Env:
         ``timeout``: at most this many seconds of waiting for the worker processes (the envs
         emulated in this process, ``inline_envs``, are not bounded by it), then ``TimeoutError``
         naming the late workers; the step stays in flight and a later ``recv()`` finishes it
-        as if it had never stopped.  ``None`` (the default) waits as long as it takes; a worker
-        that dies is reported either way.  Only the ``subproc`` backend can honour it."""
+        as if it had never stopped (at most ``MAX_TIMEOUT_S``, a million seconds).  ``None``
+        (the default) waits as long as it takes; a worker that dies is reported either way.
+        Only the ``subproc`` backend can honour it."""
         self._check_open()
         deadline = self._deadline(timeout, "recv")
         if self._in_flight is None:
+            if not self._needs_reset:
+                self._check_backend_idle()
             if self._needs_reset:
                 raise RuntimeError("nothing in flight, and the env needs reset() (before the "
                                    "first step, and after an interrupted step or reset)")
@@ -420,6 +481,8 @@ class Env:
         if self._xla_driven:
             raise RuntimeError("xla() was already called: keep stepping its latest handle, or "
                                "reset() the env first")
+        if self._in_flight is None and not self._needs_reset:
+            self._check_backend_idle()
         if self._in_flight is not None or self._needs_reset:
             raise RuntimeError("xla() needs a settled env: reset() it, and recv() any step in "
                                "flight, first")
@@ -499,9 +562,15 @@ class Env:
         if not hasattr(self.backend, "snapshot"):
             raise ValueError(f"backend {type(self.backend).__name__} cannot snapshot its "
                              "emulators; use backend='subproc'")
+        self._check_backend_idle()
+        try:
+            emulators = self.backend.snapshot()
+        except BaseException:
+            if getattr(self.backend, "pending", False):  # interrupted while the workers copy
+                self._needs_reset = True
+            raise
         return dict(plan=self.plan, seed=self.seed, state=jax.device_get(self._state),
-                    reset_pending=self._reset_pending.copy(),
-                    emulators=self.backend.snapshot())
+                    reset_pending=self._reset_pending.copy(), emulators=emulators)
 
     def restore(self, snapshot: dict) -> None:
         """Continue from ``snapshot`` (taken by :meth:`snapshot` of an env made alike; its seed

@@ -6,7 +6,8 @@ numpy) and ``gymnasium.make_vec`` (a gymnasium VectorEnv, autoreset mode NEXT_ST
     envs = gym.make_vec("stori_jax/Breakout-2.1-v0", num_envs=8)
 
 ``reset()`` without a seed is seed 0 (the env is reproducible by default); ``reset(seed=k)``
-makes it seed k's.  ``make_vec``'s default mode is the one to prefer: stori_jax steps its envs
+makes it seed k's.  After a worker died (the step raised ``WorkerError``), ``reset()`` makes the
+env again from its seed (the seed's first episode, as a fresh env's).  ``make_vec``'s default mode is the one to prefer: stori_jax steps its envs
 in its own worker processes.  Gymnasium's ``"async"`` mode puts each env in a daemonic process,
 which may start none, so there the env emulates in that process (``num_workers=0``, the same
 run); it needs ``vector_kwargs={"context": "spawn"}``, since JAX hangs in a process forked after
@@ -96,6 +97,8 @@ class _Owner:
             check_int("seed", seed, 0, MAX_SEED)  # a refused seed leaves the env as it was
             self._env.close()
             self._seed, self._env = seed, self._make(seed)
+        elif self._env.closed:  # a worker died (the step said so): start again from the seed
+            self._env = self._make(self._seed)
         self._fresh = False
 
     @staticmethod

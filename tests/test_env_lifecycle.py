@@ -153,6 +153,86 @@ def stopped(pid):
         os.kill(pid, signal.SIGCONT)
 
 
+@contextlib.contextmanager
+def ctrl_c_armed():
+    """SIGINT raises KeyboardInterrupt inside the block (whatever handler the runner left)."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def signal_after(owner, method: str):
+    """``owner.method`` does its work, then a real SIGINT arrives (once): Python runs the
+    handler right there, as a Ctrl-C landing at that point would."""
+    real = getattr(owner, method)
+
+    def and_then_ctrl_c(*args):
+        result = real(*args)
+        delattr(owner, method)  # the class's method again
+        signal.raise_signal(signal.SIGINT)
+        return result
+
+    setattr(owner, method, and_then_ctrl_c)
+
+
+def assert_same_steps(env, twin, first_got, first_actions):
+    expected = twin.step(first_actions)
+    for name, a, b in zip(("obs", "reward", "terminated", "truncated"), first_got, expected):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b), err_msg=name)
+    for t in range(6):
+        actions = np.array([t % 4, (t + 1) % 4], np.int32)
+        got, expected = env.step(actions), twin.step(actions)
+        np.testing.assert_array_equal(np.asarray(got[4]["ram"]), np.asarray(expected[4]["ram"]),
+                                      err_msg=f"step {t} after the interrupted one")
+
+
+@pytest.mark.parametrize("where", ["after the first worker got the step",
+                                   "after a worker's reply was read"])
+def test_ctrl_c_between_two_workers_leaves_the_step_in_flight(where):
+    """A Ctrl-C landing between sending the step to one worker and the next, or between reading
+    a worker's reply and recording it: the step stays in flight, recv() finishes it, and the
+    env goes on as an uninterrupted twin.  (Before, the env forgot the sent step and later
+    steps read the workers' buffers while they were being written; or recv() waited forever
+    for a reply it had already read.)"""
+    env, twin = (make("Breakout", num_workers=2, inline_envs=0) for _ in range(2))
+    try:
+        env.reset()
+        twin.reset()
+        actions = np.array([1, 3], np.int32)
+        conn = env.backend.conns[0]
+        signal_after(conn, "send_bytes" if where.startswith("after the first") else "recv_bytes")
+        with ctrl_c_armed(), pytest.raises(KeyboardInterrupt):
+            env.step(actions)
+        assert env.backend.pending or where.endswith("read")
+        assert_same_steps(env, twin, env.recv(timeout=30), actions)
+    finally:
+        env.close()
+        twin.close()
+
+
+def test_an_interrupted_snapshot_points_every_call_to_reset():
+    """Ctrl-C while the workers copy their state: step, recv, snapshot and xla all say reset(),
+    which waits for the workers and gives the twin's first observation."""
+    env, twin = make("Breakout"), make("Breakout")
+    try:
+        env.reset()
+        twin.reset()
+        with stopped(env.backend.pids[0]), ctrl_c_armed():
+            threading.Timer(0.2, os.kill, (os.getpid(), signal.SIGINT)).start()
+            with pytest.raises(KeyboardInterrupt):
+                env.snapshot()
+        for call in (lambda: env.step([0, 1]), env.recv, env.snapshot, env.xla):
+            with pytest.raises(RuntimeError, match=r"reset\(\)"):
+                call()
+        np.testing.assert_array_equal(np.asarray(env.reset()[0]), np.asarray(twin.reset()[0]))
+        assert_same_steps(env, twin, env.step([1, 1]), np.array([1, 1], np.int32))
+    finally:
+        env.close()
+        twin.close()
+
+
 @pytest.mark.timeout(60)
 @pytest.mark.parametrize("call", ["recv", "step"])
 def test_a_timed_out_recv_names_the_late_worker_and_can_be_finished(call):
@@ -337,9 +417,12 @@ def test_a_rejected_action_leaves_the_env_usable(breakout):
 
 
 @pytest.mark.parametrize("timeout, message", [
-    (-1, "timeout must be a finite number >= 0, got -1.0"),
-    ("5", "timeout must be a finite number >= 0, got '5'"),
-    (float("inf"), "timeout must be a finite number >= 0, got inf"),
+    (-1, r"timeout must be in \[0, 1000000\], got -1.0"),
+    ("5", r"timeout must be a number in \[0, 1000000\], got '5'"),
+    (float("inf"), r"timeout must be in \[0, 1000000\], got inf"),
+    # the pipes are waited on in int32 milliseconds: a longer finite wait failed, sent, with
+    # Python's own OverflowError
+    (2.148e6, r"timeout must be in \[0, 1000000\], got 2148000.0"),
 ])
 def test_a_bad_timeout_is_refused_before_waiting_or_sending(breakout, timeout, message):
     with pytest.raises(ValueError, match=message):
@@ -525,6 +608,78 @@ def test_an_interrupted_reset_says_reset_again():
     finally:
         env.close()
         twin.close()
+
+
+def test_an_env_cannot_be_copied_or_pickled_and_says_what_can():
+    """A copy shared the workers, and dropping it closed the original's."""
+    import copy
+    import pickle
+
+    with make("Breakout") as env:
+        for clone in (copy.copy, copy.deepcopy, pickle.dumps):
+            with pytest.raises(TypeError, match=r"cannot be copied or pickled: env.snapshot\(\)"):
+                clone(env)
+        env.reset()
+        assert env.step([0, 1])[0].shape == (2, 128)
+
+
+def test_an_absurd_batch_is_refused_before_anything_is_allocated():
+    """num_envs=10**9 sat in make() for minutes, then failed deep inside multiprocessing."""
+    started = time.monotonic()
+    with pytest.raises(ValueError, match=r"num_envs=1000000000 with frame_skip=4 needs .* GiB "
+                                         r"of shared buffers .* choose a smaller num_envs"):
+        make("Breakout", num_envs=10**9)
+    assert time.monotonic() - started < 30
+
+
+def test_close_from_another_thread_is_reported_as_closed_not_as_a_dead_worker():
+    env = make("Breakout")
+    env.reset()
+    os.kill(env.backend.pids[0], signal.SIGSTOP)  # busy for as long as it takes; close kills it
+    env.send([0, 1])
+    threading.Timer(0.3, env.close).start()
+    with pytest.raises(stori_jax.EnvClosedError, match="closed during a step .*another thread"):
+        env.recv()
+    assert env.closed
+
+
+FORKED_CHILD = """
+import os, sys, warnings
+import numpy as np, stori_jax
+warnings.simplefilter("ignore")  # JAX's warning about the fork
+env = stori_jax.make("Breakout", num_envs=2, seed=0, obs="ram", num_workers=1)
+env.reset()
+pid = os.fork()
+if pid == 0:  # the child: the env is the parent's; using it is refused, dropping it is harmless
+    try:
+        env.step(np.zeros(2, np.int32))
+        print("child stepped the parent's env", flush=True)
+    except RuntimeError as error:
+        print("child:", error, flush=True)
+    env.close()
+    del env
+    os._exit(0) if sys.argv[1] == "os._exit" else sys.exit(0)
+os.waitpid(pid, 0)
+obs, reward, *_ = env.step(np.ones(2, np.int32))
+print("parent stepped", obs.shape, flush=True)
+env.close()
+"""
+
+
+@pytest.mark.parametrize("ending", ["sys.exit", "os._exit"])
+def test_a_forked_child_leaves_the_parents_workers_alone(tmp_path, ending):
+    """A child forked after make(): its copy of the env refuses to step (the workers answer
+    the parent), and closing or dropping it, or exiting, does not stop the parent's workers.
+    (Before, the child's close or exit handlers sent them 'close' and terminated them: the
+    parent's next step read a stale buffer, then found its worker dead.)"""
+    script = tmp_path / "forked.py"
+    script.write_text(FORKED_CHILD)
+    out = subprocess.run([sys.executable, str(script), ending], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "child: this env was made in process" in out.stdout, out.stdout + out.stderr
+    assert "parent stepped (2, 128)" in out.stdout, out.stdout + out.stderr
+    assert "can only join a child process" not in out.stderr, out.stderr
 
 
 def test_no_workers_emulates_every_env_in_this_process():

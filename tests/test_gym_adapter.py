@@ -254,3 +254,25 @@ def test_making_an_env_in_a_process_forked_after_jax_started_says_spawn():
     assert message.startswith("RuntimeError: stori_jax.make cannot run in a process forked "
                               "from one that had started JAX"), message
     assert "vector_kwargs={'context': 'spawn'}" in message
+
+
+def test_reset_after_a_worker_died_makes_the_env_again_from_its_seed():
+    """The step reports the death; reset() (gymnasium's way on) then starts from the seed, as a
+    fresh env does, instead of pointing to stori_jax.make."""
+    import os
+    import signal
+
+    env = gym.make("stori_jax/Breakout-2.1-v0", num_workers=1)
+    fresh = gym.make("stori_jax/Breakout-2.1-v0", num_workers=1)
+    try:
+        env.reset()
+        os.kill(env.unwrapped._env.backend.pids[0], signal.SIGKILL)
+        with pytest.raises(stori_jax.WorkerError, match="died"):
+            for _ in range(50):  # the death is noticed at the next command
+                env.step(0)
+        obs, _ = env.reset()
+        np.testing.assert_array_equal(obs, fresh.reset()[0])
+        assert env.step(1)[0].shape == obs.shape
+    finally:
+        env.close()
+        fresh.close()

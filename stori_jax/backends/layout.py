@@ -45,6 +45,12 @@ def buffer_specs(num_envs: int, frame_skip: int) -> dict[str, tuple[tuple[int, .
     }
 
 
+def shared_bytes(num_envs: int, frame_skip: int) -> int:
+    """The bytes :func:`buffer_specs` asks for (computed, nothing allocated)."""
+    return sum(int(np.prod(shape, dtype=object)) * np.dtype(dtype).itemsize
+               for shape, dtype in buffer_specs(num_envs, frame_skip).values())
+
+
 @dataclass
 class SharedBuffers:
     """RawArrays (picklable into spawned workers) plus numpy views over them."""

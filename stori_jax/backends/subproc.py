@@ -19,6 +19,7 @@ from multiprocessing.connection import wait
 
 import numpy as np
 
+from stori_jax.backends.interrupts import interrupts_deferred
 from stori_jax.backends.layout import SharedBuffers
 from stori_jax.backends.worker import WorkerSpec, worker_main
 
@@ -74,8 +75,14 @@ def _main_module_not_reimported():
             setattr(main, k, v)
 
 
-def _shutdown(processes, conns) -> None:
-    """Stop every worker: ask politely, then terminate, then kill."""
+def _shutdown(processes, conns, owner_pid: int) -> None:
+    """Stop every worker: ask politely, then terminate, then kill.  In a process forked from
+    the owner, the workers are the owner's: only this process's copies of the pipes close."""
+    if os.getpid() != owner_pid:
+        for conn in conns:
+            with contextlib.suppress(OSError):
+                conn.close()
+        return
     for conn in conns:
         try:
             conn.send_bytes(b"C")
@@ -95,6 +102,24 @@ def _shutdown(processes, conns) -> None:
             conn.close()
         except OSError:
             pass
+
+
+_LIVE_BACKENDS: "weakref.WeakSet[SubprocBackend]" = weakref.WeakSet()
+
+
+def _disown_inherited_workers() -> None:
+    """In a child forked from a process with live envs: the workers are the parent's.  Drop
+    them from multiprocessing's list of this process's children, whose exit handler would
+    otherwise terminate them (and fail to join them) when the child exits."""
+    children = getattr(mp.process, "_children", None)
+    for backend in list(_LIVE_BACKENDS):
+        for p in backend.processes:
+            if children is not None:
+                children.discard(p)
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_disown_inherited_workers)
 
 
 class SubprocBackend:
@@ -130,7 +155,10 @@ class SubprocBackend:
         self.ranges = [(lo + inline_envs, hi + inline_envs)
                        for lo, hi in split_batch(num_envs - inline_envs, num_workers)]
         self.processes, self.conns = [], []
-        self._finalizer = weakref.finalize(self, _shutdown, self.processes, self.conns)
+        self.owner_pid = os.getpid()
+        self._finalizer = weakref.finalize(self, _shutdown, self.processes, self.conns,
+                                           self.owner_pid)
+        _LIVE_BACKENDS.add(self)
 
         def spec_for(lo, hi):
             return WorkerSpec(game=game, env_lo=lo, env_hi=hi, seeds=tuple(seeds[lo:hi]),
@@ -182,14 +210,18 @@ class SubprocBackend:
             raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
         if self._pending:
             raise RuntimeError("a step is already in flight: call recv() before sending again")
-        for w, (conn, command) in enumerate(zip(self.conns, commands, strict=True)):
-            try:
-                conn.send_bytes(command)
-            except (OSError, ValueError):
-                self._raise_dead(w, "while sending a command")
-        self._pending = True
+        with interrupts_deferred():  # every worker gets the command, and the record says so
+            for w, (conn, command) in enumerate(zip(self.conns, commands, strict=True)):
+                try:
+                    conn.send_bytes(command)
+                except (OSError, ValueError):
+                    self._raise_dead(w, "while sending a command")
+            self._pending = True
 
     def _raise_dead(self, w: int, when: str):
+        if self.closed:  # close() from another thread stopped the workers this one waits for
+            raise EnvClosedError(f"the environment was closed {when} (by close(), from another "
+                                 "thread); make a new one with stori_jax.make")
         p = self.processes[w]
         p.join(timeout=0.5)
         lo, hi = self.ranges[w]
@@ -215,39 +247,46 @@ class SubprocBackend:
                 if not ready:
                     late = sorted(waiting)
                     raise WorkersLate(what, late, [self.processes[w].pid for w in late])
-                for obj in ready:
-                    if obj in sentinels:
-                        w = sentinels[obj]
-                        if w in waiting and not waiting[w].poll():
-                            self._raise_dead(w, f"during {what}")
-                        continue
-                    w = next(k for k, c in waiting.items() if c is obj)
-                    try:
-                        reply = obj.recv_bytes()
-                    except (EOFError, OSError):
-                        self._raise_dead(w, f"during {what}")
-                    if reply[:1] == b"E":
-                        lo, hi = self.ranges[w]
-                        self.close()
-                        raise WorkerError(f"emulator worker {w} (envs {lo}..{hi - 1}) failed "
-                                          f"during {what}:\n{reply[1:].decode(errors='replace')}")
-                    self._replies[w] = reply[1:]
-                    del waiting[w]
+                with interrupts_deferred():  # a reply read off its pipe is recorded
+                    for obj in ready:
+                        self._take_reply(obj, waiting, sentinels, what)
         except WorkerError:
             self._waiting, self._pending = None, False
             raise
         self._waiting, self._pending = None, False
         return self._replies
 
+    def _take_reply(self, obj, waiting: dict, sentinels: dict, what: str) -> None:
+        """Record the reply (or the death) of the worker whose pipe or sentinel ``obj`` is."""
+        if obj in sentinels:
+            w = sentinels[obj]
+            if w in waiting and not waiting[w].poll():
+                self._raise_dead(w, f"during {what}")
+            return
+        w = next(k for k, c in waiting.items() if c is obj)
+        try:
+            reply = obj.recv_bytes()
+        except (EOFError, OSError):
+            self._raise_dead(w, f"during {what}")
+        if reply[:1] == b"E":
+            lo, hi = self.ranges[w]
+            self.close()
+            raise WorkerError(f"emulator worker {w} (envs {lo}..{hi - 1}) failed "
+                              f"during {what}:\n{reply[1:].decode(errors='replace')}")
+        self._replies[w] = reply[1:]
+        del waiting[w]
+
     # -- the backend protocol ---------------------------------------------------------------
 
     def send_reset(self) -> None:
-        self._send_all(b"R")
-        self._inline_command, self._what = b"R", "a reset"
+        with interrupts_deferred():
+            self._send_all(b"R")
+            self._inline_command, self._what = b"R", "a reset"
 
     def send_step(self) -> None:
-        self._send_all(b"S")
-        self._inline_command, self._what = b"S", "a step"
+        with interrupts_deferred():
+            self._send_all(b"S")
+            self._inline_command, self._what = b"S", "a step"
 
     def recv(self, timeout: float | None = None) -> dict[str, np.ndarray]:
         """Wait for the workers (at most ``timeout`` seconds, then :class:`WorkersLate` with the

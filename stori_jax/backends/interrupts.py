@@ -1,0 +1,46 @@
+"""Ctrl-C held back over a few lines of bookkeeping.
+
+Python runs a SIGINT handler between any two bytecodes, so a ``KeyboardInterrupt`` can land
+between sending a command to one worker and the next, or between reading a worker's reply and
+recording it.  The env then no longer knows which workers owe a reply, and its next step reads
+buffers that are still being written.  Inside :func:`interrupts_deferred` a Ctrl-C is noted and
+raised when the block ends, where the records agree with the workers again.  Only short blocks
+that never wait use it: a wait for the workers stays interruptible, and leaves the command in
+flight for the next ``recv()``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import threading
+
+
+_deferring: list = []  # non-empty while the main thread is inside a block
+
+
+@contextlib.contextmanager
+def interrupts_deferred():
+    """Run the block with SIGINT noted instead of handled; handle it (as the handler in place
+    before would have) when the block ends.  Outside the main thread, where Python never
+    delivers a signal, the block runs as it is."""
+    if _deferring or threading.current_thread() is not threading.main_thread():
+        yield  # inside an outer block, which handles it; or no signal can arrive here
+        return
+    previous = signal.getsignal(signal.SIGINT)
+    if previous is None:  # a handler installed outside Python: it cannot be put back
+        yield
+        return
+    noted = []
+    signal.signal(signal.SIGINT, lambda signum, frame: noted.append(frame))
+    _deferring.append(True)
+    try:
+        yield
+    finally:
+        _deferring.pop()
+        signal.signal(signal.SIGINT, previous)
+        if noted:
+            if callable(previous):  # default_int_handler raises KeyboardInterrupt here
+                previous(signal.SIGINT, noted[0])
+            elif previous == signal.SIG_DFL:
+                signal.raise_signal(signal.SIGINT)
