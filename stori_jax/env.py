@@ -15,8 +15,8 @@ import numpy as np
 
 from stori_jax.backends.interrupts import interrupts_deferred
 from stori_jax.backends.layout import RAM_SIZE, SCREEN, shared_bytes
-from stori_jax.backends.subproc import (EnvClosedError, InterruptedStepError, SubprocBackend,
-                                        WorkersLate)
+from stori_jax.backends.subproc import (MAX_TIMEOUT_S, EnvClosedError, InterruptedStepError,
+                                        SubprocBackend, WorkersLate)
 from stori_jax.checks import MAX_INT32, MAX_SEED, check_int, check_real
 from stori_jax.config import Config, GRANULARITIES
 from stori_jax.core import (Draws, EnvState, WorkerOutputs, before_step, finish_step,
@@ -124,9 +124,10 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
         num_workers = check_int("num_workers", num_workers, 0)
     if num_workers == 0:
         if inline_envs not in (None, num_envs):
-            raise ValueError(f"num_workers=0 emulates all num_envs ({num_envs}) envs in this "
-                             f"process: leave inline_envs None or set it to {num_envs}, got "
-                             f"{inline_envs!r}")
+            why = ("inside a daemonic process, which may start none, the default num_workers "
+                   "is 0: it emulates" if _in_daemonic_process() else "num_workers=0 emulates")
+            raise ValueError(f"{why} all num_envs ({num_envs}) envs in this process: leave "
+                             f"inline_envs None or set it to {num_envs}, got {inline_envs!r}")
         inline_envs = num_envs
     elif inline_envs is not None:  # every worker needs at least one env
         inline_envs = check_int("inline_envs", inline_envs, 0, num_envs - 1)
@@ -197,7 +198,8 @@ def check_memory(num_envs: int, frame_skip: int) -> None:
         raise ValueError(f"num_envs={num_envs} with frame_skip={frame_skip} needs "
                          f"{need / 2**30:.1f} GiB of shared buffers (about "
                          f"{shared_bytes(1, frame_skip) / 2**10:.0f} KiB per env), more than "
-                         f"this machine's {have / 2**30:.1f} GiB: choose a smaller num_envs")
+                         f"this machine's {have / 2**30:.1f} GiB: choose a smaller num_envs "
+                         f"or frame_skip")
 
 
 def _in_daemonic_process() -> bool:
@@ -219,10 +221,6 @@ def observation_space(plan: Plan) -> gym.spaces.Box:
     return gym.spaces.Box(0, 255, (plan.num_envs,) + shape, np.uint8)
 
 
-# recv/step/reset(timeout=...) at most: the workers' pipes are waited on in int32 milliseconds
-# (2^31 ms is 24.8 days), so a longer finite wait cannot be honoured; None waits forever
-MAX_TIMEOUT_S = 1_000_000
-
 NOT_COPIED = ("a stori_jax.Env owns its emulator worker processes and cannot be copied or "
               "pickled: env.snapshot() is picklable, and env.restore(snapshot) continues it in "
               "an env made with the same arguments")
@@ -239,6 +237,7 @@ class Env:
         self.plan = plan
         self.config = config
         self.seed = seed
+        self._owner_pid = os.getpid()  # the workers (or envpool's threads) answer this process
         self.game = get_game(plan.game)
         self.backend = backend
         self.num_envs = plan.num_envs
@@ -267,8 +266,13 @@ class Env:
 
     def close(self) -> None:
         """Stop the workers.  In a process forked from the one that made the env, only this
-        process's copy closes: the workers are the other process's."""
-        if self._xla_driven and not self.closed and not self._made_elsewhere():
+        process's copy of the subproc backend's pipes closes (the workers, and envpool's
+        threads, are the other process's)."""
+        if self._made_elsewhere():
+            if hasattr(self.backend, "owner_pid"):
+                self.backend.close()
+            return
+        if self._xla_driven and not self.closed:
             jax.effects_barrier()  # xla steps still queued finish first
         self.backend.close()
 
@@ -284,8 +288,8 @@ class Env:
 
     def __del__(self):
         backend = getattr(self, "backend", None)
-        if backend is not None:
-            backend.close()
+        if backend is not None and (not self._made_elsewhere() or hasattr(backend, "owner_pid")):
+            backend.close()  # in a forked child, the subproc backend closes only its pipe ends
 
     def __copy__(self):
         raise TypeError(NOT_COPIED)
@@ -296,14 +300,13 @@ class Env:
     def __reduce__(self):
         raise TypeError(NOT_COPIED)
 
-    def _made_elsewhere(self) -> bool:
-        owner = getattr(self.backend, "owner_pid", None)
-        return owner is not None and owner != os.getpid()
+    def _made_elsewhere(self, getpid=os.getpid) -> bool:  # bound here: __del__ at exit
+        return getattr(self, "_owner_pid", None) not in (None, getpid())
 
     def _check_open(self):
         if self._made_elsewhere():
             raise RuntimeError(
-                f"this env was made in process {self.backend.owner_pid}, and this process "
+                f"this env was made in process {self._owner_pid}, and this process "
                 f"({os.getpid()}) was forked from it: its workers answer that process only. "
                 "Make an env in this process (started with the 'spawn' method)")
         if self.closed:
@@ -347,7 +350,10 @@ class Env:
         before anything is sent, so a refused timeout changes nothing."""
         if timeout is None:
             return None
-        timeout = check_real("timeout", timeout, 0, MAX_TIMEOUT_S)
+        try:
+            timeout = check_real("timeout", timeout, 0, MAX_TIMEOUT_S)
+        except ValueError as error:
+            raise ValueError(f"{error} (seconds; None waits as long as it takes)") from None
         if not getattr(self.backend, "RECV_TIMEOUT", False):
             raise ValueError(f"{call}(timeout=...) needs backend='subproc': "
                              f"{type(self.backend).__name__} cannot bound its wait")
@@ -395,7 +401,7 @@ class Env:
                                "using it, or call reset() to step the env from Python again")
         if self._in_flight is not None:
             raise RuntimeError("a step is already in flight: call recv() before send() again")
-        self._check_backend_idle()
+        self._refuse_if_workers_busy()
         a = self.validate_actions(actions)
         if self._deterministic_before_step:
             state, draws = self._state, self._host_draws(a)
@@ -406,7 +412,7 @@ class Env:
             self.backend.send_step()
             self._in_flight = (state, draws, self._reset_pending.copy())
 
-    def _check_backend_idle(self) -> None:
+    def _refuse_if_workers_busy(self) -> None:
         """This env has nothing in flight: neither may its workers.  An interrupted snapshot
         (or any call stopped while the workers owed a reply) leaves them busy; reset() waits
         for them."""
@@ -421,14 +427,14 @@ class Env:
         ``timeout``: at most this many seconds of waiting for the worker processes (the envs
         emulated in this process, ``inline_envs``, are not bounded by it), then ``TimeoutError``
         naming the late workers; the step stays in flight and a later ``recv()`` finishes it
-        as if it had never stopped (at most ``MAX_TIMEOUT_S``, a million seconds).  ``None``
-        (the default) waits as long as it takes; a worker that dies is reported either way.
-        Only the ``subproc`` backend can honour it."""
+        as if it had never stopped.  ``None`` (the default) waits as long as it takes; a worker
+        that dies is reported either way.  Only the ``subproc`` backend can honour it, for at
+        most ``MAX_TIMEOUT_S`` (a million seconds)."""
         self._check_open()
         deadline = self._deadline(timeout, "recv")
         if self._in_flight is None:
             if not self._needs_reset:
-                self._check_backend_idle()
+                self._refuse_if_workers_busy()
             if self._needs_reset:
                 raise RuntimeError("nothing in flight, and the env needs reset() (before the "
                                    "first step, and after an interrupted step or reset)")
@@ -482,7 +488,7 @@ class Env:
             raise RuntimeError("xla() was already called: keep stepping its latest handle, or "
                                "reset() the env first")
         if self._in_flight is None and not self._needs_reset:
-            self._check_backend_idle()
+            self._refuse_if_workers_busy()
         if self._in_flight is not None or self._needs_reset:
             raise RuntimeError("xla() needs a settled env: reset() it, and recv() any step in "
                                "flight, first")
@@ -562,7 +568,7 @@ class Env:
         if not hasattr(self.backend, "snapshot"):
             raise ValueError(f"backend {type(self.backend).__name__} cannot snapshot its "
                              "emulators; use backend='subproc'")
-        self._check_backend_idle()
+        self._refuse_if_workers_busy()
         try:
             emulators = self.backend.snapshot()
         except BaseException:

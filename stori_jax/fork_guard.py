@@ -14,31 +14,28 @@ import os
 import sys
 
 _forked_after_jax = False
+_jax_started_at_fork = False
 
 
 def _jax_started() -> bool:
-    if "jax" not in sys.modules:
-        return False
-    try:
-        from jax._src import xla_bridge
-    except ImportError:  # another JAX layout: assume nothing (the old behaviour)
-        return False
-    started = getattr(xla_bridge, "backends_are_initialized", None)
-    return bool(started()) if started is not None else False
+    """JAX has made its backends (its threads run).  Read without JAX's lock and without an
+    import: this runs at a fork, where another thread may hold either."""
+    bridge = sys.modules.get("jax._src.xla_bridge")
+    return bool(getattr(bridge, "_backends", None))
 
 
-def _after_fork_in_child() -> None:
+def _before_fork() -> None:  # in the parent, before it forks
+    global _jax_started_at_fork
+    _jax_started_at_fork = _jax_started()
+
+
+def _after_fork_in_child() -> None:  # in the child: takes no lock, imports nothing
     global _forked_after_jax
-    _forked_after_jax = _forked_after_jax or _jax_started()
+    _forked_after_jax = _forked_after_jax or _jax_started_at_fork
 
 
 if hasattr(os, "register_at_fork"):
-    os.register_at_fork(after_in_child=_after_fork_in_child)
-
-
-def forked_after_jax() -> bool:
-    """This process was forked (at any depth) from one whose JAX had started."""
-    return _forked_after_jax
+    os.register_at_fork(before=_before_fork, after_in_child=_after_fork_in_child)
 
 
 def refuse_if_forked_after_jax(what: str) -> None:

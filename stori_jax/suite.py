@@ -110,13 +110,14 @@ def suite_outputs(out: Path) -> list[Path]:
         out / "gallery" / f"{game}-{name}.png" for game, name in list_presets()]
 
 
-def clear_previous_run(out: Path) -> list[Path]:
-    """Remove an earlier suite run's files from ``out`` (nothing else), so that a run on a
-    subset of the presets leaves no contact sheet beside a table that no longer lists it."""
-    found = [path for path in suite_outputs(out) if path.is_file()]
-    for path in found:
+def remove_stale_outputs(out: Path, written: list[Path]) -> list[Path]:
+    """After a run has written ``written`` in ``out``: remove the files an earlier suite run
+    left there that this one did not replace (nothing else), so that a run on a subset of the
+    presets leaves no contact sheet beside a table that no longer lists it."""
+    stale = [path for path in suite_outputs(out) if path not in written and path.is_file()]
+    for path in stale:
         path.unlink()
-    return found
+    return stale
 
 
 def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: int,
@@ -142,18 +143,14 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
                              f"presets with --games {trained_on} (asked for {others})")
         agent = str(checkpoint)
     out.mkdir(parents=True, exist_ok=True)
-    replaced = clear_previous_run(out)
-    if replaced:
-        print(f"replaced an earlier suite run's {len(replaced)} files in {out}",
-              file=sys.stderr)
-    rows = []
+    rows, written = [], [out / "results.json", out / "table.md"]
     for game, name in tqdm(presets, desc="suite", unit="preset", disable=not progress):
         rows.append(run_preset(game, name, episodes=episodes, num_envs=num_envs,
                                max_steps=max_steps, seed=seed, policy=policy,
                                progress=progress))
         if gallery:
-            contact_sheet(game, name, stori_jax.preset(game, name),
-                          out / "gallery" / f"{game}-{name}.png", seed=seed)
+            written.append(out / "gallery" / f"{game}-{name}.png")
+            contact_sheet(game, name, stori_jax.preset(game, name), written[-1], seed=seed)
     (out / "results.json").write_text(json.dumps(dict(
         agent=agent or "random", seed=seed, episodes=episodes, num_envs=num_envs,
         max_steps=max_steps, rows=rows),
@@ -163,4 +160,8 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
         text += "\nGallery (3.1 twin beside each preset): " + ", ".join(
             f"[{g} {n}](gallery/{g}-{n}.png)" for g, n in presets) + "\n"
     (out / "table.md").write_text(text)
+    stale = remove_stale_outputs(out, written)
+    if stale:
+        print(f"removed {len(stale)} contact sheets of an earlier suite run in {out} that this "
+              "run did not make", file=sys.stderr)
     return out

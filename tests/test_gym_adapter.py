@@ -276,3 +276,47 @@ def test_reset_after_a_worker_died_makes_the_env_again_from_its_seed():
     finally:
         env.close()
         fresh.close()
+
+
+FORK_WHILE_JAX_IS_BUSY = """
+import os, threading, time, warnings
+warnings.simplefilter("ignore")  # JAX's warning about the fork
+import jax.numpy as jnp
+import stori_jax
+from jax._src import xla_bridge
+
+jnp.zeros(2).block_until_ready()
+held, release = threading.Event(), threading.Event()
+
+def busy():  # another thread inside JAX (jax.devices() from a loader thread) at the fork
+    with xla_bridge._backend_lock:
+        held.set()
+        release.wait()
+
+threading.Thread(target=busy, daemon=True).start()
+held.wait()
+pid = os.fork()
+if pid == 0:
+    os._exit(0)  # a child that never touches JAX
+release.set()
+for _ in range(100):
+    if os.waitpid(pid, os.WNOHANG)[0]:
+        print("child exited")
+        break
+    time.sleep(0.1)
+else:
+    os.kill(pid, 9)
+    print("child stuck at the fork")
+"""
+
+
+def test_the_fork_guard_takes_no_lock_in_the_child():
+    """stori_jax's at-fork hook runs in every child forked after it was imported: it must not
+    take JAX's lock (or import anything), which another thread may hold at the fork.  (It did,
+    and a child that never used JAX hung for ever.)"""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", FORK_WHILE_JAX_IS_BUSY], capture_output=True,
+                         text=True, timeout=120)
+    assert out.stdout.strip() == "child exited", out.stdout + out.stderr

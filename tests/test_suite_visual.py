@@ -28,7 +28,8 @@ def test_suite_writes_table_json_and_gallery(tmp_path, capsys):
             assert img.width > 300 and img.height > 400
 
 
-def test_a_suite_run_replaces_an_earlier_runs_files_and_nothing_else(tmp_path, capsys):
+def test_a_suite_run_replaces_an_earlier_runs_files_and_nothing_else(tmp_path, capsys,
+                                                                     monkeypatch):
     out = tmp_path / "suite"
     (out / "gallery").mkdir(parents=True)
     stale = [out / "gallery" / "Boxing-2.1.png", out / "gallery" / "Breakout-3.2A.png",
@@ -36,10 +37,20 @@ def test_a_suite_run_replaces_an_earlier_runs_files_and_nothing_else(tmp_path, c
     mine = [out / "notes.txt", out / "gallery" / "my-plot.png"]
     for path in stale + mine:
         path.write_text("earlier")
+    # a run that stops early (Ctrl-C, an error) leaves the earlier run's files as they were
+    import stori_jax.suite
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as patch:
+        patch.setattr(stori_jax.suite, "run_preset", interrupted)
+        assert main(["suite", "--games", "Breakout", "--out", str(out), "--quiet"]) == 130
+    assert all(path.read_text() == "earlier" for path in stale + mine)
     assert main(["suite", "--games", "Breakout", "--presets", "1", "--episodes", "1",
                  "--num-envs", "2", "--max-steps", "20", "--out", str(out), "--quiet",
                  "--no-gallery"]) == 0
-    assert "replaced an earlier suite run's 4 files" in capsys.readouterr().err
+    assert "removed 2 contact sheets of an earlier suite run" in capsys.readouterr().err
     assert not any(path.exists() for path in stale[:2])  # no sheet beside a table without it
     assert all(path.read_text() == "earlier" for path in mine)
     rows = json.loads((out / "results.json").read_text())["rows"]

@@ -12,7 +12,9 @@ import contextlib
 import multiprocessing as mp
 import os
 import pickle
+import shutil
 import sys
+import tempfile
 import time
 import weakref
 from multiprocessing.connection import wait
@@ -22,6 +24,11 @@ import numpy as np
 from stori_jax.backends.interrupts import interrupts_deferred
 from stori_jax.backends.layout import SharedBuffers
 from stori_jax.backends.worker import WorkerSpec, worker_main
+
+
+# recv(timeout=...) at most: the workers' pipes are waited on in int32 milliseconds (2^31 ms is
+# 24.8 days), so a longer finite wait cannot be honoured; None waits as long as it takes
+MAX_TIMEOUT_S = 1_000_000
 
 
 class WorkerError(RuntimeError):
@@ -75,7 +82,12 @@ def _main_module_not_reimported():
             setattr(main, k, v)
 
 
-def _shutdown(processes, conns, owner_pid: int) -> None:
+def _remove_folders(folders: list) -> None:
+    while folders:
+        shutil.rmtree(folders.pop(), ignore_errors=True)
+
+
+def _shutdown(processes, conns, owner_pid: int, scratch: list) -> None:
     """Stop every worker: ask politely, then terminate, then kill.  In a process forked from
     the owner, the workers are the owner's: only this process's copies of the pipes close."""
     if os.getpid() != owner_pid:
@@ -102,6 +114,7 @@ def _shutdown(processes, conns, owner_pid: int) -> None:
             conn.close()
         except OSError:
             pass
+    _remove_folders(scratch)
 
 
 _LIVE_BACKENDS: "weakref.WeakSet[SubprocBackend]" = weakref.WeakSet()
@@ -156,8 +169,9 @@ class SubprocBackend:
                        for lo, hi in split_batch(num_envs - inline_envs, num_workers)]
         self.processes, self.conns = [], []
         self.owner_pid = os.getpid()
+        self._scratch = []  # folders of restore files the workers are still to read
         self._finalizer = weakref.finalize(self, _shutdown, self.processes, self.conns,
-                                           self.owner_pid)
+                                           self.owner_pid, self._scratch)
         _LIVE_BACKENDS.add(self)
 
         def spec_for(lo, hi):
@@ -221,7 +235,8 @@ class SubprocBackend:
     def _raise_dead(self, w: int, when: str):
         if self.closed:  # close() from another thread stopped the workers this one waits for
             raise EnvClosedError(f"the environment was closed {when} (by close(), from another "
-                                 "thread); make a new one with stori_jax.make")
+                                 "thread or a signal handler); make a new one with "
+                                 "stori_jax.make")
         p = self.processes[w]
         p.join(timeout=0.5)
         lo, hi = self.ranges[w]
@@ -250,10 +265,12 @@ class SubprocBackend:
                 with interrupts_deferred():  # a reply read off its pipe is recorded
                     for obj in ready:
                         self._take_reply(obj, waiting, sentinels, what)
-        except WorkerError:
-            self._waiting, self._pending = None, False
+        except BaseException:
+            if self.closed:  # a worker died or failed (or close() from another thread)
+                self._waiting, self._pending = None, False
             raise
         self._waiting, self._pending = None, False
+        _remove_folders(self._scratch)
         return self._replies
 
     def _take_reply(self, obj, waiting: dict, sentinels: dict, what: str) -> None:
@@ -321,6 +338,7 @@ class SubprocBackend:
     def snapshot(self) -> list[dict]:
         """Every emulator's state (picklable), in env order; nothing may be in flight."""
         self._send_all(b"P")
+        self._what = "a snapshot"
         states = [emulator.snapshot() for emulator in self._inline]
         replies = self._wait_all("a snapshot")
         for w in range(len(self.conns)):
@@ -343,7 +361,18 @@ class SubprocBackend:
         differs = self.restore_differences(states)
         if differs:
             raise ValueError("snapshot was taken of different emulators: " + "; ".join(differs))
-        self._send_each([b"L" + pickle.dumps(states[lo:hi]) for lo, hi in self.ranges])
+        # the states go through files: a command of a few bytes is sent at once, where a
+        # pickle larger than the pipe's buffer would block Ctrl-C until the worker reads it
+        folder = tempfile.mkdtemp(prefix="stori-jax-restore-")
+        self._scratch.append(folder)  # removed when the workers have read it (or at close)
+        commands = []
+        for w, (lo, hi) in enumerate(self.ranges):
+            path = os.path.join(folder, f"worker-{w}.pkl")
+            with open(path, "wb") as file:
+                pickle.dump(states[lo:hi], file)
+            commands.append(b"L" + os.fsencode(path))
+        self._send_each(commands)
+        self._what = "a restore"
         for emulator, snap in zip(self._inline, states):
             emulator.restore(snap)
         self._wait_all("a restore")

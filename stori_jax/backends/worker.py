@@ -5,7 +5,8 @@ uniforms, RAM-obs render decisions, reset no-ops).  Imports numpy, ale-py and th
 only (no JAX), so it starts fast.
 
 Protocol over a Pipe, one byte per command: b"S" step, b"R" reset all, b"C" close, b"P"
-snapshot (the reply carries the pickled emulator states), b"L" + pickled states: restore.
+snapshot (the reply carries the pickled emulator states), b"L" + the path of a file of
+pickled states: restore (a file, so that every command stays small: see interrupts.py).
 Replies: b"K" done (+ a payload for b"P"), or b"E" + a traceback.
 """
 
@@ -276,7 +277,9 @@ def worker_main(spec: WorkerSpec, buffers, conn, parent_pid: int) -> None:
             elif command == b"P":
                 reply += pickle.dumps([emulator.snapshot() for emulator in emulators])
             elif command[:1] == b"L":
-                for emulator, snap in zip(emulators, pickle.loads(command[1:]), strict=True):
+                with open(os.fsdecode(command[1:]), "rb") as file:
+                    states = pickle.load(file)
+                for emulator, snap in zip(emulators, states, strict=True):
                     emulator.restore(snap)
             elif command == b"C":
                 conn.send_bytes(b"K")

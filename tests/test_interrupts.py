@@ -1,0 +1,86 @@
+"""Ctrl-C held back over the env's bookkeeping (stori_jax/backends/interrupts.py): a SIGINT
+inside the block is handled once, as the handler in place would have, when the block ends."""
+
+from __future__ import annotations
+
+import signal
+import threading
+
+import pytest
+
+from stori_jax.backends.interrupts import interrupts_deferred
+
+
+@pytest.fixture
+def sigint_handler():
+    """Set a SIGINT handler for the test; the runner's own is put back after it."""
+    previous = signal.getsignal(signal.SIGINT)
+    yield lambda handler: signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGINT, previous)
+
+
+def test_a_ctrl_c_inside_the_block_is_raised_when_it_ends(sigint_handler):
+    sigint_handler(signal.default_int_handler)
+    done = []
+    with pytest.raises(KeyboardInterrupt):
+        with interrupts_deferred():
+            signal.raise_signal(signal.SIGINT)
+            done.append("after the signal")  # the block runs to its end
+            signal.raise_signal(signal.SIGINT)  # several presses: one interrupt
+    assert done == ["after the signal"]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_nested_blocks_raise_once_at_the_outer_end(sigint_handler):
+    sigint_handler(signal.default_int_handler)
+    reached = []
+    with pytest.raises(KeyboardInterrupt):
+        with interrupts_deferred():
+            with interrupts_deferred():
+                signal.raise_signal(signal.SIGINT)
+            reached.append("between the two ends")
+    assert reached == ["between the two ends"]
+
+
+def test_a_users_handler_is_called_once_and_put_back(sigint_handler):
+    calls = []
+
+    def handler(signum, frame):
+        calls.append(signum)
+
+    sigint_handler(handler)
+    with interrupts_deferred():
+        signal.raise_signal(signal.SIGINT)
+        assert calls == []
+    assert calls == [signal.SIGINT]
+    assert signal.getsignal(signal.SIGINT) is handler
+
+
+def test_an_ignored_sigint_stays_ignored(sigint_handler):
+    sigint_handler(signal.SIG_IGN)
+    with interrupts_deferred():
+        signal.raise_signal(signal.SIGINT)
+    assert signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+
+
+def test_an_error_inside_the_block_is_kept_under_the_interrupt(sigint_handler):
+    sigint_handler(signal.default_int_handler)
+    with pytest.raises(KeyboardInterrupt) as caught:
+        with interrupts_deferred():
+            signal.raise_signal(signal.SIGINT)
+            raise RuntimeError("a worker died")
+    assert isinstance(caught.value.__context__, RuntimeError)
+
+
+def test_outside_the_main_thread_the_block_changes_no_handler(sigint_handler):
+    sigint_handler(signal.default_int_handler)
+    seen = []
+
+    def in_a_thread():
+        with interrupts_deferred():
+            seen.append(signal.getsignal(signal.SIGINT))
+
+    thread = threading.Thread(target=in_a_thread)
+    thread.start()
+    thread.join()
+    assert seen == [signal.default_int_handler]
