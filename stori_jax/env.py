@@ -268,13 +268,14 @@ class Env:
         """Stop the workers.  In a process forked from the one that made the env, only this
         process's copy of the subproc backend's pipes closes (the workers, and envpool's
         threads, are the other process's)."""
-        if self._made_elsewhere():
-            if hasattr(self.backend, "owner_pid"):
-                self.backend.close()
-            return
-        if self._xla_driven and not self.closed:
+        if self._xla_driven and not self.closed and not self._made_elsewhere():
             jax.effects_barrier()  # xla steps still queued finish first
-        self.backend.close()
+        self._close_backend()
+
+    def _close_backend(self) -> None:
+        # a backend that knows its owner (subproc) closes only its own pipe ends elsewhere
+        if not self._made_elsewhere() or hasattr(self.backend, "owner_pid"):
+            self.backend.close()
 
     @property
     def closed(self) -> bool:
@@ -287,9 +288,8 @@ class Env:
         self.close()
 
     def __del__(self):
-        backend = getattr(self, "backend", None)
-        if backend is not None and (not self._made_elsewhere() or hasattr(backend, "owner_pid")):
-            backend.close()  # in a forked child, the subproc backend closes only its pipe ends
+        if getattr(self, "backend", None) is not None:
+            self._close_backend()
 
     def __copy__(self):
         raise TypeError(NOT_COPIED)

@@ -8,10 +8,11 @@ numpy) and ``gymnasium.make_vec`` (a gymnasium VectorEnv, autoreset mode NEXT_ST
 ``reset()`` without a seed is seed 0 (the env is reproducible by default); ``reset(seed=k)``
 makes it seed k's.  After a worker died (the step raised ``WorkerError``), ``reset()`` makes the
 env again from its seed (the seed's first episode, as a fresh env's).  ``make_vec``'s default
-mode is the one to prefer: stori_jax steps its envs in its own worker processes.  Gymnasium's ``"async"`` mode puts each env in a daemonic process,
-which may start none, so there the env emulates in that process (``num_workers=0``, the same
-run); it needs ``vector_kwargs={"context": "spawn"}``, since JAX hangs in a process forked after
-it started (stori_jax refuses that with an error saying so).
+mode is the one to prefer: stori_jax steps its envs in its own worker processes.  Gymnasium's
+``"async"`` mode puts each env in a daemonic process, which may start none, so there the env
+emulates in that process (``num_workers=0``, the same run); it needs
+``vector_kwargs={"context": "spawn"}``, since JAX hangs in a process forked after it started
+(stori_jax refuses that with an error saying so).
 
 Extra keyword arguments (``obs``, ``frame_skip``, ``granularity``, ``backend``, ``num_workers``,
 ``inline_envs``, ``max_episode_frames``, ``noop_max``) go to :func:`stori_jax.make`; the id fixes

@@ -101,13 +101,18 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def sheet_path(out: Path, game: str, name: str) -> Path:
+    """Where a suite run in ``out`` puts the contact sheet of ``game``'s preset ``name``."""
+    return out / "gallery" / f"{game}-{name}.png"
+
+
 def suite_outputs(out: Path) -> list[Path]:
     """Every file a suite run can write in ``out``: its table, its JSON and each paper preset's
     contact sheet."""
     from stori_jax import list_presets
 
     return [out / "table.md", out / "results.json"] + [
-        out / "gallery" / f"{game}-{name}.png" for game, name in list_presets()]
+        sheet_path(out, game, name) for game, name in list_presets()]
 
 
 def remove_stale_outputs(out: Path, written: list[Path]) -> list[Path]:
@@ -149,7 +154,7 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
                                max_steps=max_steps, seed=seed, policy=policy,
                                progress=progress))
         if gallery:
-            written.append(out / "gallery" / f"{game}-{name}.png")
+            written.append(sheet_path(out, game, name))
             contact_sheet(game, name, stori_jax.preset(game, name), written[-1], seed=seed)
     (out / "results.json").write_text(json.dumps(dict(
         agent=agent or "random", seed=seed, episodes=episodes, num_envs=num_envs,
@@ -158,7 +163,7 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
     text = f"Agent: {agent or 'uniformly random policy'}\n\n" + table(rows)
     if gallery:
         text += "\nGallery (3.1 twin beside each preset): " + ", ".join(
-            f"[{g} {n}](gallery/{g}-{n}.png)" for g, n in presets) + "\n"
+            f"[{g} {n}]({sheet_path(out, g, n).relative_to(out)})" for g, n in presets) + "\n"
     (out / "table.md").write_text(text)
     stale = remove_stale_outputs(out, written)
     if stale:
