@@ -118,14 +118,15 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
         plan = dataclasses.replace(plan, frames_layout=FRAMES_LAYOUT)
         # raises a clear ValueError naming what needs the subproc backend
         return Env(plan, cfg, seed, make_envpool_backend(plan, seed, max_episode_frames))
-    if num_workers is None and _in_daemonic_process():
+    daemonic_default = num_workers is None and _in_daemonic_process()
+    if daemonic_default:
         num_workers = 0  # it may start no processes: every env is emulated here
     if num_workers is not None:
         num_workers = check_int("num_workers", num_workers, 0)
     if num_workers == 0:
         if inline_envs not in (None, num_envs):
             why = ("inside a daemonic process, which may start none, the default num_workers "
-                   "is 0: it emulates" if _in_daemonic_process() else "num_workers=0 emulates")
+                   "is 0: it emulates" if daemonic_default else "num_workers=0 emulates")
             raise ValueError(f"{why} all num_envs ({num_envs}) envs in this process: leave "
                              f"inline_envs None or set it to {num_envs}, got {inline_envs!r}")
         inline_envs = num_envs

@@ -125,10 +125,11 @@ def _disown_inherited_workers() -> None:
     them from multiprocessing's list of this process's children, whose exit handler would
     otherwise terminate them (and fail to join them) when the child exits."""
     children = getattr(mp.process, "_children", None)
+    if children is None:  # another multiprocessing layout: nothing to drop
+        return
     for backend in list(_LIVE_BACKENDS):
         for p in backend.processes:
-            if children is not None:
-                children.discard(p)
+            children.discard(p)
 
 
 if hasattr(os, "register_at_fork"):
