@@ -84,13 +84,15 @@ class EnvpoolBackend:
             raise ValueError(f"envpool has no Atari task {task!r} for game {plan.game!r}; "
                              "use backend='subproc' (the default), which runs every ale-py game")
         b = plan.num_envs
-        self.pool = envpool.make(
+        self._make_pool = lambda seed: envpool.make(
             task, env_type="gymnasium", num_envs=b, batch_size=b, seed=envpool_seed(seed),
             num_threads=0, img_height=SCREEN[0], img_width=SCREEN[1], gray_scale=False,
             stack_num=1, frame_skip=plan.frame_skip, noop_max=plan.noop_max + 1,
             episodic_life=False, reward_clip=False, repeat_action_probability=0.0,
             use_fire_reset=False, full_action_space=False,
-            max_episode_steps=-(-max_episode_frames // plan.frame_skip))  # as subproc: the step that reaches it
+            # as on subproc: the episode ends at the step that reaches max_episode_frames
+            max_episode_steps=-(-max_episode_frames // plan.frame_skip))
+        self.pool = self._make_pool(seed)
         self.num_envs = b
         # the subproc backend's buffers, but one max-pooled screen per env, channels first
         self.views = {name: np.zeros(shape, dtype)
@@ -109,8 +111,13 @@ class EnvpoolBackend:
         if self._closed:
             raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
 
-    def send_reset(self) -> None:
+    def send_reset(self, seed: int | None = None) -> None:
+        """Reset every env; with ``seed``, on a new pool of that seed (envpool cannot reseed
+        one: a pool of the same seed starts its emulators alike)."""
         self._check()
+        if seed is not None:
+            pool, self.pool = self.pool, self._make_pool(seed)
+            pool.close()
         self._pending = "reset"
 
     def send_step(self) -> None:

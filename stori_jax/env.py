@@ -17,6 +17,7 @@ from stori_jax.backends.interrupts import interrupts_deferred
 from stori_jax.backends.layout import RAM_SIZE, SCREEN, shared_bytes
 from stori_jax.backends.subproc import (MAX_TIMEOUT_S, EnvClosedError, InterruptedStepError,
                                         SubprocBackend, WorkersLate)
+from stori_jax.backends.worker import emulator_seed
 from stori_jax.checks import MAX_INT32, MAX_SEED, check_int, check_real
 from stori_jax.config import Config, GRANULARITIES
 from stori_jax.core import (Draws, EnvState, WorkerOutputs, before_step, finish_step,
@@ -32,8 +33,7 @@ BACKENDS = ("subproc", "envpool")
 
 def emulator_seeds(seed: int, num_envs: int) -> list[int]:
     """ALE seeds of envs 0..B-1: a function of the seed and the env index alone."""
-    return [int(np.random.SeedSequence([seed, i]).generate_state(1)[0] & 0x7FFFFFFF)
-            for i in range(num_envs)]
+    return [emulator_seed(seed, i) for i in range(num_envs)]
 
 
 def resolve_config(game: str, preset: str | None, config: Config | None) -> Config:
@@ -257,6 +257,7 @@ class Env:
         self._state = initial_state(plan, seed)
         self._in_flight = None
         self._needs_reset = True
+        self._reseed_due = False  # reset(seed=...) asked, and no reset has completed since
         self._reset_pending = np.zeros(plan.num_envs, bool)
         # stepping through env.xla(): the current chain of handles and its steps so far
         self._xla_epoch, self._xla_steps, self._xla_driven = 0, 0, False
@@ -315,18 +316,28 @@ class Env:
 
     # -- reset ----------------------------------------------------------------------------------
 
-    def reset(self, timeout: float | None = None):
+    def reset(self, seed: int | None = None, timeout: float | None = None):
         """Reset every env. Returns (obs, info).
+
+        ``seed``: restart the whole run from this seed (emulators and key), exactly as
+        ``make(..., seed=seed)`` followed by ``reset()`` would, without starting new worker
+        processes; ``env.seed`` becomes it.  None (the default) goes on with the current
+        streams: the next episodes of this run.
 
         ``timeout``: at most this many seconds of waiting for the worker processes in all (a step
         still in flight is finished first), then ``TimeoutError`` naming the late workers; the env
-        then needs ``reset()`` again, which first waits for the late reset.  As in :meth:`recv`."""
+        then needs ``reset()`` again, which first waits for the late reset (and restarts from
+        the seed asked for, if the late one did).  As in :meth:`recv`."""
         self._check_open()
+        if seed is not None:
+            seed = check_int("seed", seed, 0, MAX_SEED)
         deadline = self._deadline(timeout, "reset")
         late = "the env needs reset(): call it again (it waits for this one first), or close() it"
         # until this reset has finished, an interruption (Ctrl-C, a timeout) leaves an env that
         # needs one
         self._needs_reset = True
+        if seed is not None:  # until a reset completes, every reset restarts from it
+            self.seed, self._reseed_due = seed, True
         self._settle_xla()
         if self._in_flight is not None or getattr(self.backend, "pending", False):
             # finish a step (or an interrupted reset) still in flight; a step interrupted inside
@@ -334,15 +345,17 @@ class Env:
             with contextlib.suppress(InterruptedStepError):
                 self._wait(deadline, timeout, late)
             self._in_flight = None
+        if self._reseed_due:
+            self._state = initial_state(self.plan, self.seed)
         zeros = jnp.zeros((self.num_envs,), jnp.int32)
         state = self._state._replace(episode_step=zeros, prev_executed=zeros)
         state, draws = before_step(self._jit_plan, state, zeros, resetting=True)
         self._write_inputs(draws, reset_first=None)
-        self.backend.send_reset()
+        self.backend.send_reset(self.seed if self._reseed_due else None)
         out = self._wait(deadline, timeout, late)
         everyone = np.ones(self.num_envs, bool)
         (obs, _, _, _, info), _ = self._finish(state, draws, out, everyone)
-        self._needs_reset = False
+        self._needs_reset = self._reseed_due = False
         self._reset_pending[:] = False
         return obs, info
 
@@ -605,7 +618,7 @@ class Env:
         self._state = EnvState(*jax.tree.map(jnp.asarray, tuple(snapshot["state"])))
         self.seed = snapshot["seed"]  # emulators and key are that seed's run now
         self._reset_pending = np.array(snapshot["reset_pending"], bool)
-        self._needs_reset = False
+        self._needs_reset = self._reseed_due = False
 
     # -- internals ------------------------------------------------------------------------------
 

@@ -54,7 +54,7 @@ def _first_env_info(info: dict) -> dict:
 
 
 class _Owner:
-    """Holds one stori_jax Env and re-makes it when reset() asks for another seed."""
+    """Holds one stori_jax Env (made again only after a worker died)."""
 
     def _init_env(self, game, preset, num_envs, seed, make_kwargs):
         import stori_jax
@@ -82,8 +82,9 @@ class _Owner:
         self._fresh = True  # no reset yet: the env is exactly as made from self._seed
         self.closed = False
 
-    def _reseed(self, seed):
-        """An explicit seed restarts everything (emulators and key) from that seed."""
+    def _reset_env(self, seed):
+        """Reset the env: an explicit seed restarts everything (emulators and key) from that
+        seed, in the same worker processes; after a worker died, the env is made again."""
         if self.closed:
             from stori_jax.backends.subproc import EnvClosedError
 
@@ -92,15 +93,17 @@ class _Owner:
         if isinstance(seed, (list, tuple, np.ndarray)):
             raise ValueError(f"seed must be one int for all envs (env i's emulator seed derives "
                              f"from it and i); per-env seed lists are not supported, got {seed!r}")
-        if seed is not None and not (self._fresh and seed == self._seed):
+        reseed = seed is not None and not (self._fresh and seed == self._seed)
+        if reseed:
             from stori_jax.checks import MAX_SEED, check_int
 
             check_int("seed", seed, 0, MAX_SEED)  # a refused seed leaves the env as it was
-            self._env.close()
-            self._seed, self._env = seed, self._make(seed)
-        elif self._env.closed:  # a worker died (the step said so): start again from the seed
+        if self._env.closed:  # a worker died (the step said so): start again from the seed
             self._env = self._make(self._seed)
         self._fresh = False
+        obs, info = self._env.reset(seed=seed if reseed else None)
+        self._seed = self._env.seed
+        return obs, info
 
     @staticmethod
     def _check_options(options):
@@ -133,9 +136,8 @@ class StoriGymEnv(_Owner, gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         self._check_options(options)
-        self._reseed(seed)  # checks the seed before gymnasium's np_random takes it
+        obs, info = self._reset_env(seed)  # checks the seed before gymnasium's np_random
         super().reset(seed=seed)
-        obs, info = self._env.reset()
         return _numpy(obs[0]), _first_env_info(info)
 
     def step(self, action):
@@ -164,9 +166,8 @@ class StoriVectorEnv(_Owner, VectorEnv):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         self._check_options(options)
-        self._reseed(seed)
+        obs, info = self._reset_env(seed)
         super().reset(seed=seed)  # np_random / np_random_seed, as gymnasium's vector envs
-        obs, info = self._env.reset()
         return _numpy(obs), _numpy_info(info)
 
     def step(self, actions):

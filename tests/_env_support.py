@@ -70,14 +70,15 @@ class Run:
         return self.stacked("terminated") | self.stacked("truncated")
 
 
-def run_lockstep(envs, num_steps, policy):
-    """Reset every env of ``envs`` and step them together with the same actions.
+def run_lockstep(envs, num_steps, policy, reset_seed=None):
+    """Reset every env of ``envs`` (``reset(seed=reset_seed)``) and step them together with the
+    same actions.
 
     ``policy(k, runs)`` returns the actions of step k (it may read the runs so far).
     Returns one :class:`Run` per env."""
     runs = []
     for env in envs:
-        obs, info = env.reset()
+        obs, info = env.reset(seed=reset_seed)
         runs.append(Run(*to_numpy((obs, info))))
     for k in range(num_steps):
         actions = np.asarray(policy(k, runs), np.int32)
@@ -96,9 +97,14 @@ def lockstep_with_twin(game, config, num_steps, policy, **kw):
         twin.close()
 
 
-def run_env(env, actions):
-    """Reset ``env`` and step it through ``actions`` (T, B)."""
-    return run_lockstep([env], len(actions), lambda k, runs: actions[k])[0]
+def run_env(env, actions, reset_seed=None):
+    """Reset ``env`` (``reset(seed=reset_seed)``) and step it through ``actions`` (T, B)."""
+    return run_lockstep([env], len(actions), lambda k, runs: actions[k], reset_seed)[0]
+
+
+def emulator_states(env) -> list[bytes]:
+    """Every emulator's whole ALE state, its random number generator included (a settled env)."""
+    return [emulator["ale"] for emulator in env.snapshot()["emulators"]]
 
 
 def random_actions(num_actions, num_steps, num_envs, seed=0):

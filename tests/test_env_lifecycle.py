@@ -19,7 +19,7 @@ import pytest
 import stori_jax
 from stori_jax import Config, ConceptDrift, ObservationMask
 
-from _env_support import make, process_gone, wait_gone
+from _env_support import emulator_states, make, process_gone, wait_gone
 
 
 def test_close_stops_every_worker_and_later_calls_raise():
@@ -323,6 +323,37 @@ def test_a_timed_out_reset_needs_a_reset_that_waits_for_it(in_flight):
     finally:
         ev.close()
         twin.close()
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("in_flight", [False, True], ids=["settled", "step-in-flight"])
+def test_a_timed_out_reset_with_a_seed_is_finished_from_that_seed(in_flight):
+    """reset(seed=7, timeout) while a worker is stopped (late with the reset, or with a step
+    still in flight, before the reset was sent): the plain reset() that finishes it restarts
+    from seed 7, the inline env too, as a new env of seed 7."""
+    kw = dict(num_envs=3, num_workers=1, inline_envs=1)
+    ev = make("Breakout", preset="1", seed=3, **kw)
+    fresh = make("Breakout", preset="1", seed=7, **kw)
+    try:
+        ev.reset()
+        ev.step([1, 2, 3])
+        with stopped(ev.backend.pids[0]):
+            if in_flight:
+                ev.send([3, 3, 3])
+            with pytest.raises(TimeoutError, match="the env needs reset"):
+                ev.reset(seed=7, timeout=0.3)
+        assert ev.seed == 7
+        got, expected = ev.reset(timeout=30), fresh.reset()
+        np.testing.assert_array_equal(np.asarray(got[1]["ram"]), np.asarray(expected[1]["ram"]))
+        assert emulator_states(ev) == emulator_states(fresh)  # ALE's random generator too
+        for actions in ([1, 3, 0], [2, 0, 1], [3, 3, 3]):
+            got, expected = ev.step(actions), fresh.step(actions)
+            for name in ("ram", "executed_action"):
+                np.testing.assert_array_equal(np.asarray(got[4][name]),
+                                              np.asarray(expected[4][name]), err_msg=name)
+    finally:
+        ev.close()
+        fresh.close()
 
 
 CHILD = textwrap.dedent("""

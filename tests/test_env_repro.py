@@ -11,7 +11,7 @@ import pytest
 
 from stori_jax import ActionNoise, Config, ObservationMask, RandomEvent, get_game
 
-from _env_support import make, random_actions, run_env
+from _env_support import emulator_states, make, random_actions, run_env
 
 NUM_ENVS, NUM_STEPS = 4, 24
 
@@ -92,6 +92,51 @@ def test_different_seed_gives_a_different_run(name):
     assert not np.array_equal(a.stacked("executed_action"), b.stacked("executed_action")), name
     assert not np.array_equal(a.stacked("obs"), b.stacked("obs")), f"{name}: same observations"
     assert not np.array_equal(a.ram, b.ram), f"{name}: same RAM"
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_reset_with_a_seed_restarts_the_run_as_a_fresh_env_of_that_seed(name):
+    """``reset(seed=7)`` in an env of another seed, deep in its episodes, gives seed 7's run bit
+    for bit (emulators, no-op starts, every draw) in the same worker processes, for the
+    workers' envs and the inline ones alike; a plain ``reset()`` then goes on with seed 7's
+    streams instead of starting them over."""
+    case = dict(CASES[name])
+    game = case.pop("game")
+    actions = random_actions(get_game(game).num_actions, NUM_STEPS, NUM_ENVS, seed=123)
+    reference = _reference_run(name)
+    kw = dict(num_envs=NUM_ENVS, num_workers=1, inline_envs=2, **case)
+    with make(game, seed=7, **kw) as fresh:
+        fresh.reset()
+        fresh_states = emulator_states(fresh)
+    with make(game, seed=3, **kw) as env:
+        pids = env.backend.pids
+        run_env(env, actions[:17])
+        env.reset(seed=7)  # the emulators, their random generators included, start afresh
+        assert emulator_states(env) == fresh_states
+        _assert_identical(reference, run_env(env, actions, reset_seed=7),
+                          f"{name}: reset(seed=7) vs a new env of seed 7")
+        assert env.seed == 7 and env.backend.pids == pids
+        assert all(p.is_alive() for p in env.backend.processes)
+        _assert_identical(reference, run_env(env, actions, reset_seed=7),
+                          f"{name}: reset(seed=7) twice")
+        after = run_env(env, actions)
+    assert not np.array_equal(after.stacked("executed_action"),
+                              reference.stacked("executed_action")), name
+
+
+@pytest.mark.parametrize("seed", [-1, 2 ** 31, 1.5, "7", True])
+def test_a_refused_reset_seed_names_the_field_and_changes_nothing(seed):
+    actions = random_actions(get_game("Breakout").num_actions, 6, 2, seed=1)
+    with make("Breakout", preset="1", seed=4) as env, \
+            make("Breakout", preset="1", seed=4) as twin:
+        env.reset(), twin.reset()
+        env.step(actions[0]), twin.step(actions[0])
+        with pytest.raises(ValueError, match="seed"):
+            env.reset(seed=seed)
+        assert env.seed == 4
+        for a in actions[1:]:  # the run goes on where it was, as the twin's
+            np.testing.assert_array_equal(np.asarray(env.step(a)[4]["ram"]),
+                                          np.asarray(twin.step(a)[4]["ram"]))
 
 
 @pytest.mark.parametrize("name", ["bankheist-mixed"])

@@ -18,17 +18,34 @@ def on(backend):
 
 def run(game, preset, steps=40, seed=0, obs="raw", **kwargs):
     with stori_jax.make(game, preset, num_envs=3, seed=seed, obs=obs, **{**EP, **kwargs}) as env:
-        obs_, info = env.reset()
-        trace = [np.asarray(obs_)]
-        rewards, rams = [], []
-        rng = np.random.default_rng(1)
-        for _ in range(steps):
-            obs_, reward, terminated, truncated, info = env.step(
-                rng.integers(0, env.num_actions, 3))
-            trace.append(np.asarray(obs_))
-            rewards.append(np.asarray(reward))
-            rams.append(np.asarray(info["ram"]))
-        return np.stack(trace), np.stack(rewards), np.stack(rams), info
+        return trace(env, steps)
+
+
+def trace(env, steps, reset_seed=None):
+    """(observations, rewards, RAMs, last info) of ``steps`` random steps after a reset."""
+    obs_, info = env.reset(seed=reset_seed)
+    observations = [np.asarray(obs_)]
+    rewards, rams = [], []
+    rng = np.random.default_rng(1)
+    for _ in range(steps):
+        obs_, reward, terminated, truncated, info = env.step(
+            rng.integers(0, env.num_actions, env.num_envs))
+        observations.append(np.asarray(obs_))
+        rewards.append(np.asarray(reward))
+        rams.append(np.asarray(info["ram"]))
+    return np.stack(observations), np.stack(rewards), np.stack(rams), info
+
+
+def test_reset_with_a_seed_restarts_the_run_as_a_fresh_env_of_that_seed():
+    """envpool cannot reseed a pool: reset(seed=k) starts a new one, and the run is seed k's."""
+    expected = run("Breakout", "1", seed=4)
+    with stori_jax.make("Breakout", "1", num_envs=3, seed=9, obs="raw", **EP) as env:
+        other = trace(env, 25)
+        got = trace(env, 40, reset_seed=4)
+        assert env.seed == 4
+    for x, y in zip(expected[:3], got[:3]):
+        np.testing.assert_array_equal(x, y)
+    assert not np.array_equal(other[2], got[2][:25])
 
 
 @pytest.mark.parametrize("game, preset, random", [

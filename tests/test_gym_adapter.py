@@ -56,6 +56,27 @@ def test_single_env_reset_seed_reproduces_the_run():
         env.close()
 
 
+def test_reset_with_a_new_seed_keeps_the_worker_processes():
+    """reset(seed=k) restarts from seed k in the same workers (it used to start new ones), and
+    the run is a new env's of seed k."""
+    actions = np.random.default_rng(0).integers(0, 4, (30, 2))
+    runs = []
+    for seed, reseed in ((5, None), (2, 5)):
+        envs = gym.make_vec("stori_jax/Breakout-1-v0", num_envs=2, obs="ram", seed=seed)
+        try:
+            pids = envs._env.backend.pids
+            if reseed is not None:
+                envs.reset()
+                for a in actions[:7]:
+                    envs.step(a)
+            obs, _ = envs.reset(seed=reseed)
+            runs.append(np.stack([obs] + [envs.step(a)[0] for a in actions]))
+            assert envs._env.backend.pids == pids
+        finally:
+            envs.close()
+    np.testing.assert_array_equal(runs[0], runs[1])
+
+
 def test_vector_env_next_step_autoreset():
     envs = gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, obs="ram", frame_skip=4)
     try:

@@ -23,7 +23,7 @@ import numpy as np
 
 from stori_jax.backends.interrupts import interrupts_deferred
 from stori_jax.backends.layout import SharedBuffers
-from stori_jax.backends.worker import WorkerSpec, worker_main
+from stori_jax.backends.worker import WorkerSpec, reset_command, reset_seed, worker_main
 
 
 # recv(timeout=...) at most: the workers' pipes are waited on in int32 milliseconds (2^31 ms is
@@ -296,10 +296,13 @@ class SubprocBackend:
 
     # -- the backend protocol ---------------------------------------------------------------
 
-    def send_reset(self) -> None:
+    def send_reset(self, seed: int | None = None) -> None:
+        """Reset every emulator; with ``seed``, first restart each from that batch seed, as a
+        new backend of it would start (the processes stay)."""
+        command = reset_command(seed)
         with interrupts_deferred():
-            self._send_all(b"R")
-            self._inline_command, self._what = b"R", "a reset"
+            self._send_all(command)
+            self._inline_command, self._what = command, "a reset"
 
     def send_step(self) -> None:
         with interrupts_deferred():
@@ -318,7 +321,10 @@ class SubprocBackend:
             while self._inline_next < len(self._inline):
                 emulator = self._inline[self._inline_next]
                 try:
-                    emulator.step() if self._inline_command == b"S" else emulator.start_episode()
+                    if self._inline_command == b"S":
+                        emulator.step()
+                    else:
+                        emulator.start_episode(reset_seed(self._inline_command))
                 except BaseException:
                     # stopped inside an emulator's frame loop: its state is half a step
                     self._inline_broken = emulator.i

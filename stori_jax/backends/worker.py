@@ -4,7 +4,8 @@ Deterministic: everything random arrives in the shared buffers (executed actions
 uniforms, RAM-obs render decisions, reset no-ops).  Imports numpy, ale-py and the game tables
 only (no JAX), so it starts fast.
 
-Protocol over a Pipe, one byte per command: b"S" step, b"R" reset all, b"C" close, b"P"
+Protocol over a Pipe, one byte per command: b"S" step, b"R" reset all (b"R" + a seed in
+ASCII: first restart every emulator from that batch seed, as a new env of it), b"C" close, b"P"
 snapshot (the reply carries the pickled emulator states), b"L" + the path of a file of
 pickled states: restore (a file, so that every command stays small: see interrupts.py).
 Replies: b"K" done (+ a payload for b"P"), or b"E" + a traceback.
@@ -24,6 +25,22 @@ from dataclasses import dataclass
 import numpy as np
 
 from stori_jax.backends.layout import RESET_RENDER_BITS, STEP_RENDER_BITS
+
+
+def emulator_seed(seed: int, index: int) -> int:
+    """The ALE seed of env ``index`` of a batch seeded ``seed``: a function of the two alone, so
+    a seed gives the same emulators however the batch is split between processes."""
+    return int(np.random.SeedSequence([seed, index]).generate_state(1)[0] & 0x7FFFFFFF)
+
+
+def reset_command(batch_seed: int | None) -> bytes:
+    """The command that resets every emulator (from ``batch_seed`` afresh, unless None)."""
+    return b"R" if batch_seed is None else b"R%d" % batch_seed
+
+
+def reset_seed(command: bytes) -> int | None:
+    """The batch seed a reset command restarts from (None: a plain reset)."""
+    return int(command[1:]) if len(command) > 1 else None
 
 
 @dataclass(frozen=True)
@@ -56,7 +73,8 @@ class Emulator:
         ale.setInt("random_seed", int(seed))
         ale.setFloat("repeat_action_probability", 0.0)
         ale.setInt("max_num_frames_per_episode", int(spec.max_episode_frames))
-        ale.loadROM(roms.get_rom_path(game.rom_id))
+        self.rom_path = roms.get_rom_path(game.rom_id)
+        ale.loadROM(self.rom_path)
         self.ale = ale
         self.actions = list(ale.getMinimalActionSet())
         self.noop = self.actions[0]
@@ -98,9 +116,14 @@ class Emulator:
         v["ram_rendered"][i] = rendered
         v["lives"][i] = ale.lives()
 
-    def start_episode(self) -> None:
+    def start_episode(self, batch_seed: int | None = None) -> None:
         """A reset the parent asked for (not an autoreset): it reports no step's outcome, so
-        the previous step's reward, ends, events and episode totals do not carry over."""
+        the previous step's reward, ends, events and episode totals do not carry over.  With
+        ``batch_seed``, the emulator first starts afresh as env ``i`` of a batch of that seed
+        (ALE applies its seed when it loads the ROM: a reload is a new emulator)."""
+        if batch_seed is not None:
+            self.ale.setInt("random_seed", emulator_seed(batch_seed, self.i))
+            self.ale.loadROM(self.rom_path)
         for name in ("reward", "terminated", "truncated", "event_fired", "episode_return",
                      "episode_length"):
             self.v[name][self.i] = 0
@@ -271,9 +294,9 @@ def worker_main(spec: WorkerSpec, buffers, conn, parent_pid: int) -> None:
             if command == b"S":
                 for emulator in emulators:
                     emulator.step()
-            elif command == b"R":
+            elif command[:1] == b"R":
                 for emulator in emulators:
-                    emulator.start_episode()
+                    emulator.start_episode(reset_seed(command))
             elif command == b"P":
                 reply += pickle.dumps([emulator.snapshot() for emulator in emulators])
             elif command[:1] == b"L":
