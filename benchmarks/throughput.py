@@ -203,13 +203,13 @@ def stori(game, preset, batch, seconds, obs, backend):
 
 def envpool_supports(game, preset):
     import stori_jax
-    from envpool_bridge import unsupported_reason
+    from envpool_bridge import unsupported_reasons
     from stori_jax.plan import compile_plan
 
     cfg = stori_jax.preset(game, preset).replace(granularity="step")
     plan = compile_plan(cfg, stori_jax.get_game(game), num_envs=1, frame_skip=FRAME_SKIP,
                         obs="raw", noop_max=0, autoreset=False)
-    return unsupported_reason(plan) is None
+    return not unsupported_reasons(plan)
 
 
 # -- the run ----------------------------------------------------------------------------------

@@ -20,6 +20,12 @@ An episode that ends before a step's last two frames: envpool stops its frame lo
 taking the screens, so the final observation (``autoreset=False``) repeats the step before's;
 the ``subproc`` backend shows the episode's last frame.
 
+Episode ends: ``max_episode_frames`` becomes envpool's step cap (frames / frame skip, rounded up),
+which does not count the reset's no-op frames as ALE's frame cap on ``subproc`` does (with
+``noop_max`` > 0 a truncation can come a step later here); and where the game ends on the step
+that reaches the cap, envpool reports ``terminated`` False (``truncated`` only), while
+``subproc`` reports both.
+
 No-op starts: envpool plays at least one NOOP frame at every reset (its ``noop_max=N`` draws
 1..N frames), so this backend passes ``noop_max + 1`` and an episode starts after 1..noop_max+1
 NOOP frames (one frame later than on ``subproc``, which plays 0..noop_max; the same number of
@@ -42,25 +48,28 @@ def envpool_seed(seed: int) -> int:
     return int(np.random.SeedSequence([seed, 0xE27]).generate_state(1)[0]) & MAX_BASE_SEED
 
 
-def unsupported_reason(plan) -> str | None:
-    """Why ``plan`` needs the subproc backend, or None if envpool can run it."""
+def unsupported_reasons(plan) -> list[str]:
+    """Every reason why ``plan`` needs the subproc backend (none: envpool can run it)."""
+    reasons = []
     if plan.event is not None:
-        return "2.1 random events write the RAM between frames"
+        reasons.append("2.1 random events write the RAM between frames")
     if plan.mask is not None and plan.mask.kind == "ram":
-        return "RAM observation modes render frames from a modified RAM"
+        reasons.append("RAM observation modes render frames from a modified RAM")
     if plan.per_frame and plan.noise is not None:
-        return "type 1 at 'frame' granularity needs an action per emulator frame (use granularity='step')"
-    if plan.per_frame and plan.mask is not None:
-        return "masks at 'frame' granularity need each emulator frame (use granularity='step')"
+        reasons.append("type 1 at 'frame' granularity needs an action per emulator frame "
+                       "(use granularity='step')")
+    if plan.per_frame and plan.mask is not None and plan.mask.kind != "ram":
+        reasons.append("masks at 'frame' granularity need each emulator frame "
+                       "(use granularity='step')")
     if plan.autoreset:
-        return "envpool autoresets on the next step: pass autoreset=False"
-    return None
+        reasons.append("envpool autoresets on the next step: pass autoreset=False")
+    return reasons
 
 
 def make_envpool_backend(plan, seed: int, max_episode_frames: int) -> "EnvpoolBackend":
-    reason = unsupported_reason(plan)
-    if reason is not None:
-        raise ValueError(f"backend='envpool' cannot run this config: {reason}; "
+    reasons = unsupported_reasons(plan)
+    if reasons:
+        raise ValueError(f"backend='envpool' cannot run this config: {'; '.join(reasons)}; "
                          "use backend='subproc' (the default), which supports every mode")
     return EnvpoolBackend(plan, seed, max_episode_frames)
 

@@ -163,6 +163,22 @@ def test_xla_misuse_is_a_clear_error():
         step(handle, jnp.zeros(2, jnp.int32))
 
 
+def test_64_bit_actions_out_of_range_are_refused_not_wrapped():
+    """With jax_enable_x64, int64 2**32 + 1 cast to int32 is 1: the xla step refuses it as
+    env.step does (it executed action 1)."""
+    with jax.enable_x64(True), make("Breakout") as env:
+        env.reset()
+        handle, step = env.xla()
+        for actions in (jnp.array([2 ** 32 + 1, 0], jnp.int64),
+                        jnp.array([-2 ** 32 + 2, 0], jnp.int64),
+                        jnp.array([2 ** 63, 1], jnp.uint64)):
+            with pytest.raises(jax.errors.JaxRuntimeError, match=r"actions out of range: .* got "
+                               r"values (0\.\.2147483647|-2147483648\.\.0|1\.\.2147483647)\n"):
+                step(handle, actions)
+        handle, (obs, *_, info) = step(handle, jnp.array([3, 1], jnp.int64))
+        np.testing.assert_array_equal(np.asarray(info["executed_action"])[:, -1], [3, 1])
+
+
 def test_a_worker_dying_under_an_xla_step_is_reported():
     with make("Breakout", num_envs=2, num_workers=1, inline_envs=0) as env:
         env.reset()

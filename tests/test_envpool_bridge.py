@@ -112,6 +112,10 @@ def test_episode_statistics_and_next_step_reset():
     (dict(preset="1", granularity="frame"), "type 1 at 'frame' granularity"),
     (dict(preset="3.2B", granularity="frame"), "masks at 'frame' granularity"),
     (dict(preset="3.1", autoreset=True), "pass autoreset=False"),
+    # every reason at once, not one fix at a time
+    (dict(preset="1", granularity="frame", autoreset=True),
+     r"'frame' granularity needs an action per emulator frame \(use granularity='step'\); "
+     r"envpool autoresets on the next step: pass autoreset=False; use backend='subproc'"),
 ])
 def test_unsupported_configs_name_the_subproc_backend(kwargs, message):
     args = {**EP, **kwargs}
