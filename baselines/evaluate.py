@@ -56,12 +56,17 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
     eval_seed = seed + EVAL_SEED_OFFSET if eval_seed is None else eval_seed
     num_envs = min(num_envs, episodes)
     if checkpoint is not None:
-        from baselines.ppo import load_policy
+        from baselines.ppo import load_policy, train_env_seeds
 
         config, choose = load_policy(checkpoint, policy)
         if (config.game, config.preset) != (game, preset):
             raise ValueError(f"checkpoint {checkpoint} was trained on {config.game} "
                              f"{config.preset}, not {game} {preset}")
+        if eval_seed in train_env_seeds(config.seed):
+            raise ValueError(f"eval seed {eval_seed} (--eval-seed; by default the training seed "
+                             f"+ {EVAL_SEED_OFFSET}) is one of the training envs' seeds "
+                             f"{list(train_env_seeds(config.seed))}: the evaluation would replay "
+                             "training's episodes; choose another --eval-seed")
     else:
         from stori_jax.suite import random_policy
 
@@ -70,7 +75,7 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
     quotas = episode_quotas(episodes, num_envs)
     returns = [[] for _ in range(num_envs)]
     lengths = [[] for _ in range(num_envs)]
-    key = jax.random.PRNGKey(eval_seed)
+    key = stori_jax.agent_key(eval_seed)  # not the env's own key chain
     start, agent_steps = time.perf_counter(), 0
     with stori_jax.make(game, preset, num_envs=num_envs, seed=eval_seed, obs="atari84",
                         max_episode_frames=max_episode_frames) as env:

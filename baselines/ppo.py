@@ -29,6 +29,7 @@ import optax
 
 from baselines.evaluate import CHECKPOINT_POLICIES, stori_game
 from stori_jax.checks import check_int, check_real
+from stori_jax.core import agent_key
 
 NETWORKS = ("nature", "nips", "tiny")
 ACTION_HEADS = ("joint", "factored")
@@ -281,18 +282,23 @@ class Rollout(NamedTuple):
     done: jax.Array        # the episode ended after this step (terminated or truncated)
 
 
+def train_env_seeds(seed: int) -> tuple[int, int]:
+    """The env seeds of a training run's two half-batches: distinct for distinct seeds."""
+    return 2 * seed, 2 * seed + 1
+
+
 def make_envs(config: PPOConfig):
     """Two half-batches with their own emulator workers (none emulated in this process, which
-    chooses actions meanwhile), one core of the machine left for the agent.  Seeds 2*seed and
-    2*seed+1: distinct for distinct seeds.  The split over workers never changes the results."""
+    chooses actions meanwhile), one core of the machine left for the agent; seeds
+    :func:`train_env_seeds`.  The split over workers never changes the results."""
     import stori_jax
 
     half = config.num_envs // 2
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     workers = max(1, min(half, ((cores or 2) - 1) // 2))
-    return [stori_jax.make(config.game, config.preset, num_envs=half, seed=2 * config.seed + g,
+    return [stori_jax.make(config.game, config.preset, num_envs=half, seed=env_seed,
                            obs="atari84", num_workers=workers, inline_envs=0)
-            for g in range(2)]
+            for env_seed in train_env_seeds(config.seed)]
 
 
 def collect(envs, act_fn, params, obs, key, num_steps: int, episodes: list, step0: int):
@@ -400,11 +406,12 @@ def make_update(network, optimizer, config: PPOConfig):
 
     def epoch(carry, key):
         params, opt_state, flat = carry
-        order = jax.random.permutation(key, config.batch_size)
+        order_key, shift_key = jax.random.split(key)
+        order = jax.random.permutation(order_key, config.batch_size)
         shuffled = jax.tree.map(
             lambda x: x[order].reshape(config.num_minibatches, config.minibatch_size,
                                        *x.shape[1:]), flat)
-        shift_keys = jax.random.split(jax.random.fold_in(key, 1), config.num_minibatches)
+        shift_keys = jax.random.split(shift_key, config.num_minibatches)
         (params, opt_state), metrics = jax.lax.scan(minibatch_step, (params, opt_state),
                                                     (shuffled, shift_keys))
         return (params, opt_state, flat), metrics
@@ -531,7 +538,7 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
                 _rewrite_csv(path, fields, _rows_upto(path, fields, step))
             elapsed = ckpt["elapsed_s"]
         else:
-            key = jax.random.PRNGKey(config.seed)
+            key = agent_key(config.seed)  # the env seeds 2*seed, 2*seed+1 draw their own chains
             key, init_key = jax.random.split(key)
             obs = [env.reset()[0] for env in envs]
             params = network.init(init_key, obs[0])

@@ -21,6 +21,7 @@ _LAZY = {
     "make": ("stori_jax.env", "make"),
     "Env": ("stori_jax.env", "Env"),
     "rollout": ("stori_jax.rollout", "rollout"),
+    "agent_key": ("stori_jax.core", "agent_key"),
     "Trajectory": ("stori_jax.rollout", "Trajectory"),
     "XlaHandle": ("stori_jax.xla", "XlaHandle"),
     "WorkerError": ("stori_jax.backends.subproc", "WorkerError"),

@@ -43,11 +43,27 @@ class Draws(NamedTuple):
     step_active: jax.Array     # (B,) bool: the mask/RAM-obs component is on for this step
 
 
+AGENT_STREAM = 0x61676E74  # "agnt": far above any env index the env's keys are folded with
+
+
+def env_key(seed: int) -> jax.Array:
+    """The root of an env's key chain: every draw of a run of ``seed`` comes from it."""
+    return jax.random.PRNGKey(seed)
+
+
+def agent_key(seed: int) -> jax.Array:
+    """A key for an agent's own draws (action sampling, initialisation) beside an env of
+    ``seed``.  Not ``jax.random.PRNGKey(seed)``: the env's chain starts there, and an agent
+    splitting that key the env's way would sample its actions with the very keys the env's
+    draws come from."""
+    return jax.random.fold_in(env_key(seed), AGENT_STREAM)
+
+
 def initial_state(plan: Plan, seed: int) -> EnvState:
     b = plan.num_envs
     stack = (jnp.zeros((b, ATARI84, ATARI84, STACK), jnp.uint8) if plan.obs == "atari84"
              else jnp.zeros((b,), jnp.uint8))
-    return EnvState(key=jax.random.PRNGKey(seed), episode_step=jnp.zeros((b,), jnp.int32),
+    return EnvState(key=env_key(seed), episode_step=jnp.zeros((b,), jnp.int32),
                     prev_executed=jnp.zeros((b,), jnp.int32), stack=stack)
 
 

@@ -11,7 +11,8 @@ from stori_jax.checks import check_int
 
 
 class Trajectory(NamedTuple):
-    """Stacked over time: every leaf has a leading (T, B) shape; ``last_obs`` is (B, ...)."""
+    """Stacked over time: every leaf has a leading (T, B) shape; ``last_obs`` is (B, ...).
+    To go on: ``rollout(env, policy_fn, params, traj.last_key, n, obs=traj.last_obs)``."""
 
     obs: jax.Array          # the observation each action was chosen from
     action: jax.Array
@@ -20,6 +21,7 @@ class Trajectory(NamedTuple):
     truncated: jax.Array
     info: dict
     last_obs: jax.Array     # the observation after the final step
+    last_key: jax.Array     # the key after the final step's split: the next rollout's key
 
 
 def _is_prng_key(key) -> bool:
@@ -37,7 +39,10 @@ def rollout(env, policy_fn: Callable[[Any, jax.Array, jax.Array], jax.Array], pa
 
     Starts from ``obs`` when given (continuing a run), else resets the env.  The policy is jitted
     here; its randomness comes from ``key`` (split once per step), so the same key, params and
-    env seed give the same trajectory.
+    env seed give the same trajectory.  Give the agent a key of its own, such as
+    ``stori_jax.agent_key(seed)``: an env of ``seed`` draws from the chain of
+    ``jax.random.PRNGKey(seed)``, split as here, so that key would sample the policy's actions
+    with the env's own step keys.
     """
     from stori_jax.env import Env
 
@@ -67,4 +72,4 @@ def rollout(env, policy_fn: Callable[[Any, jax.Array, jax.Array], jax.Array], pa
         steps.append((obs, actions, reward, terminated, truncated, info))
         obs = next_obs
     stacked = jax.tree.map(lambda *xs: jnp.stack(xs), *steps)
-    return Trajectory(*stacked, last_obs=obs)
+    return Trajectory(*stacked, last_obs=obs, last_key=key)

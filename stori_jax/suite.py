@@ -31,15 +31,18 @@ def episode_quotas(episodes: int, num_envs: int) -> np.ndarray:
 def play(env, obs, seed: int, *, max_steps: int, episodes: int | None = None,
          progress: str | None = None, policy=None) -> dict:
     """Step ``env`` from ``obs`` (its reset's) under ``policy(obs, key)`` (default: uniformly
-    random), keys from ``seed``, for ``max_steps`` agent steps or until every env played its
-    quota of ``episodes`` (:func:`episode_quotas`; None: no quota); count what happened.  The
+    random), keys from ``seed``'s agent stream (:func:`stori_jax.agent_key`), for
+    ``max_steps`` agent steps or until every env played its quota of ``episodes``
+    (:func:`episode_quotas`; None: no quota); count what happened.  The
     returns are those of the episodes within the quotas (all of them without ``episodes``);
     events, corruptions and masks are counted over every step played."""
     import jax
     from tqdm import tqdm
 
+    from stori_jax.core import agent_key
+
     policy = policy or random_policy(env.num_actions)
-    key = jax.random.PRNGKey(seed)
+    key = agent_key(seed)
     quotas = (np.full(env.num_envs, np.iinfo(np.int64).max) if episodes is None
               else episode_quotas(episodes, env.num_envs))
     ended = np.zeros(env.num_envs, np.int64)

@@ -293,6 +293,13 @@ def test_checkpoint_evaluation(uninterrupted, policy):
     with pytest.raises(ValueError, match="trained on Breakout 1"):
         evaluate("Breakout", "3.1", policy=policy, episodes=1,
                  checkpoint=full / "checkpoint.pkl", progress=False)
+    seed = ppo.PPOConfig.from_recorded(
+        ppo.load_checkpoint(full / "checkpoint.pkl")["config"]).seed
+    for eval_seed in ppo.train_env_seeds(seed):
+        with pytest.raises(ValueError, match=rf"eval seed {eval_seed} \(--eval-seed; .* one of "
+                                             r"the training envs' seeds"):
+            evaluate("Breakout", "1", policy=policy, episodes=1, eval_seed=eval_seed,
+                     checkpoint=full / "checkpoint.pkl", progress=False)
 
 
 # -- the table --------------------------------------------------------------------------------

@@ -39,6 +39,63 @@ def test_rollout_stacks_time_major_and_is_deterministic():
         np.testing.assert_array_equal(a, b)
 
 
+def test_a_rollout_continued_from_its_last_key_and_obs_is_one_long_rollout():
+    params = {"num_actions": 4}
+    with stori_jax.make("Breakout", "1", num_envs=2, seed=4, obs="ram") as env:
+        whole = stori_jax.rollout(env, random_policy, params, stori_jax.agent_key(4), 8)
+    with stori_jax.make("Breakout", "1", num_envs=2, seed=4, obs="ram") as env:
+        first = stori_jax.rollout(env, random_policy, params, stori_jax.agent_key(4), 5)
+        rest = stori_jax.rollout(env, random_policy, params, first.last_key, 3,
+                                 obs=first.last_obs)
+    for name in ("obs", "action", "reward"):
+        np.testing.assert_array_equal(getattr(whole, name),
+                                      np.concatenate([getattr(first, name), getattr(rest, name)]))
+    np.testing.assert_array_equal(whole.last_key, rest.last_key)
+
+
+def _key_bytes(keys) -> set:
+    return {bytes(np.asarray(k, np.uint32)) for k in keys}
+
+
+def _chain(key, steps):
+    """Every key an agent (rollout, the suite) or an env holds over ``steps`` steps: each step
+    splits the key into the next one and the step's own."""
+    keys = []
+    for _ in range(steps):
+        key, step_key = jax.random.split(key)
+        keys += [key, step_key]
+    return keys
+
+
+def test_the_agent_key_stream_shares_no_key_with_the_envs():
+    """An env of seed s draws from PRNGKey(s)'s chain (its step keys folded with each env's
+    index); an agent keyed with PRNGKey(s) would sample with the env's very step keys, and
+    agent_key(s) holds none of them.  The suite's random policy (stori-jax run, suite) gets
+    its keys from agent_key."""
+    from stori_jax.functional.keys import env_keys
+    from stori_jax.suite import play
+
+    seed, steps, b = 7, 12, 3
+    env_chain = _chain(jax.random.PRNGKey(seed), steps)
+    env_side = _key_bytes(env_chain) | _key_bytes(
+        k for step_key in env_chain[1::2] for k in env_keys(step_key, b))
+    assert _key_bytes(_chain(jax.random.PRNGKey(seed), steps)) & env_side  # the naive choice
+    assert not _key_bytes(_chain(stori_jax.agent_key(seed), steps)) & env_side
+
+    seen = []
+
+    def policy(obs, key):
+        seen.append((key, env._state.key))
+        return jnp.zeros(obs.shape[0], jnp.int32)
+
+    with stori_jax.make("Breakout", "1", num_envs=b, seed=seed, obs="ram") as env:
+        obs, _ = env.reset()
+        play(env, obs, seed, max_steps=steps, policy=policy)
+    agent_keys = _key_bytes(key for key, _ in seen)
+    assert len(agent_keys) == steps
+    assert not agent_keys & (env_side | _key_bytes(state for _, state in seen))
+
+
 def test_rollout_rejects_bad_arguments():
     with stori_jax.make("Breakout", num_envs=1, seed=0, obs="ram") as env:
         with pytest.raises(ValueError, match="num_steps must be >= 1, got 0"):
