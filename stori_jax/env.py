@@ -91,12 +91,12 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
     frame_skip = check_int("frame_skip", frame_skip, 1)
     max_episode_frames = check_int("max_episode_frames", max_episode_frames, 1, MAX_INT32)
     noop_max = check_int("noop_max", noop_max, 0, MAX_INT32 - 1)
-    if backend == "subproc":
-        check_memory(num_envs, frame_skip)
     if obs is None:
         obs = "ram" if cfg.ram_observation else "atari84"
     if obs not in OBS_KINDS:
         raise ValueError(f"obs must be one of {list(OBS_KINDS)}, got {obs!r}")
+    if backend == "subproc":
+        check_memory(num_envs, frame_skip, screens=obs != "ram")
     if cfg.ram_observation and obs != "ram":
         raise ValueError(f"type 0 (ram_observation) observes the RAM: obs must be 'ram', got {obs!r}")
     if obs == "ram" and any(name == "observation" for name, _, _ in cfg.components()):
@@ -186,11 +186,11 @@ def default_split(num_envs: int, cores: int) -> tuple[int, int]:
     return workers, num_envs // (workers + 1)
 
 
-def check_memory(num_envs: int, frame_skip: int) -> None:
+def check_memory(num_envs: int, frame_skip: int, screens: bool = True) -> None:
     """Refuse a batch whose shared buffers alone would not fit in this machine's memory, before
     anything is allocated (a typo of num_envs would otherwise allocate for minutes, then fail
     deep inside multiprocessing)."""
-    need = shared_bytes(num_envs, frame_skip)
+    need = shared_bytes(num_envs, frame_skip, screens)
     try:
         have = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     except (ValueError, OSError, AttributeError):  # not known here: nothing to compare with
@@ -198,9 +198,9 @@ def check_memory(num_envs: int, frame_skip: int) -> None:
     if need > have:
         raise ValueError(f"num_envs={num_envs} with frame_skip={frame_skip} needs "
                          f"{need / 2**30:.1f} GiB of shared buffers (about "
-                         f"{shared_bytes(1, frame_skip) / 2**10:.0f} KiB per env), more than "
-                         f"this machine's {have / 2**30:.1f} GiB: choose a smaller num_envs "
-                         f"or frame_skip")
+                         f"{shared_bytes(1, frame_skip, screens) / 2**10:.1f} KiB per env), "
+                         f"more than this machine's {have / 2**30:.1f} GiB: choose a smaller "
+                         "num_envs or frame_skip")
 
 
 def _in_daemonic_process() -> bool:

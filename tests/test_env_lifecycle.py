@@ -687,6 +687,21 @@ def test_an_absurd_batch_is_refused_before_anything_is_allocated():
     assert time.monotonic() - started < 30
 
 
+def test_a_ram_observation_shares_no_screen_buffers():
+    """obs='ram' allocated two screens per env it never reads (200 KB an env: 0.8 GB of shared
+    memory at B = 4096); now its frame buffer is empty, and the memory check counts so."""
+    with make("Breakout", num_envs=3) as ram, make("Breakout", num_envs=3, obs="raw") as raw:
+        assert len(ram.backend.buffers.raw["frames"][0]) == 0
+        assert len(raw.backend.buffers.raw["frames"][0]) == 2 * 3 * 210 * 160 * 3
+        for env in (ram, raw):
+            env.reset()
+        np.testing.assert_array_equal(np.asarray(ram.step([1, 2, 3])[4]["ram"]),
+                                      np.asarray(raw.step([1, 2, 3])[4]["ram"]))
+    from stori_jax.backends.layout import shared_bytes
+
+    assert shared_bytes(1, 4, screens=False) < 1024 < 2 * 210 * 160 * 3 < shared_bytes(1, 4)
+
+
 @pytest.mark.timeout(60)
 def test_close_from_another_thread_is_reported_as_closed_not_as_a_dead_worker():
     env = make("Breakout")

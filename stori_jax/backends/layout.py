@@ -19,7 +19,10 @@ STEP_RENDER_BITS = (1, 2)
 RESET_RENDER_BITS = (4, 8)
 
 
-def buffer_specs(num_envs: int, frame_skip: int) -> dict[str, tuple[tuple[int, ...], type]]:
+def buffer_specs(num_envs: int, frame_skip: int,
+                 screens: bool = True) -> dict[str, tuple[tuple[int, ...], type]]:
+    """Name -> (shape, dtype) of every buffer; without ``screens`` (a RAM observation) the
+    frame buffer holds no pixels."""
     b = num_envs
     return {
         # parent -> workers
@@ -30,7 +33,8 @@ def buffer_specs(num_envs: int, frame_skip: int) -> dict[str, tuple[tuple[int, .
         "noops": ((b,), np.int32),                     # no-op frames after a reset
         "reset_first": ((b,), np.uint8),               # reset this env instead of stepping it
         # workers -> parent
-        "frames": ((2, b) + SCREEN, np.uint8),         # the last two screens, slot-major
+        "frames": ((2, b) + (SCREEN if screens else (0, 0, SCREEN[2])), np.uint8),
+        #                                                the last two screens, slot-major
         #                                                (one frame in both: see single_frame)
         "ram": ((b, RAM_SIZE), np.uint8),
         "reward": ((b,), np.float32),
@@ -45,10 +49,10 @@ def buffer_specs(num_envs: int, frame_skip: int) -> dict[str, tuple[tuple[int, .
     }
 
 
-def shared_bytes(num_envs: int, frame_skip: int) -> int:
+def shared_bytes(num_envs: int, frame_skip: int, screens: bool = True) -> int:
     """The bytes :func:`buffer_specs` asks for (computed, nothing allocated)."""
     return sum(int(np.prod(shape, dtype=object)) * np.dtype(dtype).itemsize
-               for shape, dtype in buffer_specs(num_envs, frame_skip).values())
+               for shape, dtype in buffer_specs(num_envs, frame_skip, screens).values())
 
 
 @dataclass
@@ -58,9 +62,10 @@ class SharedBuffers:
     raw: dict
 
     @classmethod
-    def allocate(cls, ctx, num_envs: int, frame_skip: int) -> "SharedBuffers":
+    def allocate(cls, ctx, num_envs: int, frame_skip: int,
+                 screens: bool = True) -> "SharedBuffers":
         raw = {}
-        for name, (shape, dtype) in buffer_specs(num_envs, frame_skip).items():
+        for name, (shape, dtype) in buffer_specs(num_envs, frame_skip, screens).items():
             nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
             raw[name] = (ctx.RawArray(ctypes.c_uint8, nbytes), shape, np.dtype(dtype).str)
         return cls(raw)

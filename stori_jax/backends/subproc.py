@@ -162,7 +162,7 @@ class SubprocBackend:
         self.frames_layout = "pooled" if pool_screens else "pair"
         self.max_episode_frames = max_episode_frames
         ctx = mp.get_context("spawn")
-        self.buffers = SharedBuffers.allocate(ctx, num_envs, frame_skip)
+        self.buffers = SharedBuffers.allocate(ctx, num_envs, frame_skip, want_screens)
         self.views = self.buffers.views()
         if num_workers and not 0 <= inline_envs < num_envs:
             raise ValueError(f"inline_envs must be in [0, num_envs - 1], got {inline_envs}")
