@@ -85,7 +85,7 @@ DEFAULT_ROOT = Path("results") / "train"
 
 
 def cmd_train(args) -> int:
-    from baselines.evaluate import evaluate, write_result
+    from baselines.evaluate import EVAL_SEED_OFFSET, check_eval_seed, evaluate, write_result
     from baselines.ppo import PPOConfig, train
     from stori_jax.checks import check_int
     from stori_jax.cli import check_out
@@ -117,6 +117,10 @@ def cmd_train(args) -> int:
     if args.resume and not (out / "checkpoint.pkl").exists():
         raise ValueError(f"--resume: {out} holds no checkpoint.pkl (a run stopped before its "
                          "first checkpoint has nothing to continue): run without --resume")
+    if args.eval_episodes:  # checked before training, not after it
+        check_eval_seed(config.seed, config.seed + EVAL_SEED_OFFSET,
+                        "train without --eval-episodes, then run stori-jax eval --checkpoint "
+                        f"{out}/checkpoint.pkl --eval-seed S")
     trained = config.num_iterations * config.batch_size
     if trained != config.total_steps:
         print(f"stori-jax: --steps {config.total_steps} rounds up to {trained} agent steps, whole "

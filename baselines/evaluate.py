@@ -38,6 +38,17 @@ def stori_game(name: str) -> str:
     return game
 
 
+def check_eval_seed(train_seed: int, eval_seed: int, advice: str) -> None:
+    """Refuse an evaluation seed that is one of the training envs' own (the evaluation would
+    replay training's episodes); ``advice`` says what to do instead."""
+    from baselines.ppo import train_env_seeds
+
+    if eval_seed in train_env_seeds(train_seed):
+        raise ValueError(f"eval seed {eval_seed} is one of the training envs' seeds "
+                         f"{list(train_env_seeds(train_seed))} (training seed {train_seed}): "
+                         f"the evaluation would replay training's episodes; {advice}")
+
+
 def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: int = 0,
              eval_seed: int | None = None, num_envs: int = EVAL_NUM_ENVS, checkpoint: Path | None = None,
              max_episode_frames: int = 108_000, progress: bool = True) -> dict:
@@ -56,17 +67,14 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
     eval_seed = seed + EVAL_SEED_OFFSET if eval_seed is None else eval_seed
     num_envs = min(num_envs, episodes)
     if checkpoint is not None:
-        from baselines.ppo import load_policy, train_env_seeds
+        from baselines.ppo import load_policy
 
         config, choose = load_policy(checkpoint, policy)
         if (config.game, config.preset) != (game, preset):
             raise ValueError(f"checkpoint {checkpoint} was trained on {config.game} "
                              f"{config.preset}, not {game} {preset}")
-        if eval_seed in train_env_seeds(config.seed):
-            raise ValueError(f"eval seed {eval_seed} (--eval-seed; by default the training seed "
-                             f"+ {EVAL_SEED_OFFSET}) is one of the training envs' seeds "
-                             f"{list(train_env_seeds(config.seed))}: the evaluation would replay "
-                             "training's episodes; choose another --eval-seed")
+        check_eval_seed(config.seed, eval_seed, "choose another --eval-seed (by default "
+                        f"the training seed + {EVAL_SEED_OFFSET})")
     else:
         from stori_jax.suite import random_policy
 

@@ -12,6 +12,8 @@ import math
 import numbers
 from typing import Any
 
+import numpy as np
+
 
 def _range_text(minimum, maximum) -> str:
     if minimum is not None and maximum is not None:
@@ -84,3 +86,26 @@ def check_real(name: str, value: Any, minimum: float | None = None,
 def check_probability(name: str, value: Any) -> float:
     """``value`` as a float in [0, 1]."""
     return check_real(name, value, 0, 1)
+
+
+def check_actions(actions, num_envs: int, num_actions: int):
+    """A batch of actions checked on the host: shape (num_envs,), an integer dtype, values in
+    [0, num_actions); returned as int32 numpy."""
+    expected = f"shape ({num_envs},) of ints in [0, {num_actions - 1}]"
+    try:
+        a = np.asarray(actions)
+    except Exception as e:  # noqa: BLE001 - anything not array-like
+        raise ValueError(f"actions must be an array of {expected}, got {actions!r}") from e
+    if actions is None or a.dtype.kind in "OSUV":  # None, strings, objects: not numbers
+        raise ValueError(f"actions must be an array of {expected}, got "
+                         f"{type(actions).__name__} {actions!r:.60}")
+    if a.shape != (num_envs,):
+        raise ValueError(f"actions must have {expected}, got shape {a.shape}")
+    if a.dtype.kind not in "iu" or (isinstance(actions, (list, tuple)) and any(
+            isinstance(x, (bool, np.bool_)) for x in actions)):
+        raise ValueError(f"actions must have an integer dtype ({expected}), got {a.dtype}"
+                         + (" with bools" if a.dtype.kind in "iu" else ""))
+    if a.size and (a.min() < 0 or a.max() >= num_actions):
+        raise ValueError(f"actions out of range: expected {expected}, got values "
+                         f"{a.min()}..{a.max()}")
+    return a.astype(np.int32)

@@ -18,7 +18,8 @@ from stori_jax.backends.layout import RAM_SIZE, SCREEN, shared_bytes
 from stori_jax.backends.subproc import (MAX_TIMEOUT_S, EnvClosedError, InterruptedStepError,
                                         SubprocBackend, WorkersLate)
 from stori_jax.backends.worker import emulator_seed
-from stori_jax.checks import MAX_INT32, MAX_SEED, check_int, check_real
+from stori_jax.checks import (MAX_INT32, MAX_SEED, check_actions, check_int,
+                              check_real)
 from stori_jax.config import Config, GRANULARITIES
 from stori_jax.core import (Draws, EnvState, WorkerOutputs, before_step, finish_step,
                             initial_state)
@@ -385,24 +386,7 @@ class Env:
 
     def validate_actions(self, actions) -> np.ndarray:
         """Host-side check: shape (B,), integer dtype, values in [0, num_actions)."""
-        expected = f"shape ({self.num_envs},) of ints in [0, {self.num_actions - 1}]"
-        try:
-            a = np.asarray(actions)
-        except Exception as e:  # noqa: BLE001 - anything not array-like
-            raise ValueError(f"actions must be an array of {expected}, got {actions!r}") from e
-        if actions is None or a.dtype.kind in "OSUV":  # None, strings, objects: not numbers
-            raise ValueError(f"actions must be an array of {expected}, got "
-                             f"{type(actions).__name__} {actions!r:.60}")
-        if a.shape != (self.num_envs,):
-            raise ValueError(f"actions must have {expected}, got shape {a.shape}")
-        if a.dtype.kind not in "iu" or (isinstance(actions, (list, tuple)) and any(
-                isinstance(x, (bool, np.bool_)) for x in actions)):
-            raise ValueError(f"actions must have an integer dtype ({expected}), got {a.dtype}"
-                             + (" with bools" if a.dtype.kind in "iu" else ""))
-        if a.size and (a.min() < 0 or a.max() >= self.num_actions):
-            raise ValueError(f"actions out of range: expected {expected}, got values "
-                             f"{a.min()}..{a.max()}")
-        return a.astype(np.int32)
+        return check_actions(actions, self.num_envs, self.num_actions)
 
     def send(self, actions) -> None:
         """Start one step of every env with ``actions`` (B,) ints."""

@@ -98,12 +98,12 @@ class _Owner:
             from stori_jax.checks import MAX_SEED, check_int
 
             check_int("seed", seed, 0, MAX_SEED)  # a refused seed leaves the env as it was
+        if reseed:  # asked for, so kept even if this reset fails (a worker died in it)
+            self._seed = seed
         if self._env.closed:  # a worker died (the step said so): start again from the seed
-            self._env = self._make(self._seed)
+            self._env, reseed = self._make(self._seed), False
         self._fresh = False
-        obs, info = self._env.reset(seed=seed if reseed else None)
-        self._seed = self._env.seed
-        return obs, info
+        return self._env.reset(seed=seed if reseed else None)
 
     @staticmethod
     def _check_options(options):

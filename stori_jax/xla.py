@@ -25,6 +25,7 @@ import numpy as np
 from jax.experimental import io_callback
 
 from stori_jax.backends.layout import SCREEN, buffer_specs
+from stori_jax.checks import check_actions
 from stori_jax.core import EnvState, WorkerOutputs, before_step, finish_step
 from stori_jax.functional.preprocess import frames_shape
 
@@ -94,11 +95,21 @@ def xla_step(plan, emulate, handle: XlaHandle, actions):
 
 
 def make_step(plan, emulate):
-    """``step(handle, actions)``, jitted (it may also be called inside a caller's jit).
+    """``step(handle, actions)``, jitted (it may also be called inside a caller's jit; actions
+    given as host values are checked before they enter it).
     ``emulate`` is a bound method of the env, held weakly: JAX's caches keep every traced
     callback alive, and a strong one would keep the env and its worker processes with it."""
     _quiet_callback_log()
-    return jax.jit(functools.partial(xla_step, plan, _weak_callback(emulate)))
+    jitted = jax.jit(functools.partial(xla_step, plan, _weak_callback(emulate)))
+
+    def step(handle, actions):
+        if not isinstance(actions, jax.Array):
+            # a host value (numpy, a list): with x64 off (JAX's default) jit casts a 64-bit one
+            # to int32 before tracing, wrapping 2**32 + 1 to 1; check it as env.step does
+            check_actions(actions, plan.num_envs, plan.num_actions)
+        return jitted(handle, actions)
+
+    return step
 
 
 def _weak_callback(method):

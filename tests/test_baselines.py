@@ -296,8 +296,8 @@ def test_checkpoint_evaluation(uninterrupted, policy):
     seed = ppo.PPOConfig.from_recorded(
         ppo.load_checkpoint(full / "checkpoint.pkl")["config"]).seed
     for eval_seed in ppo.train_env_seeds(seed):
-        with pytest.raises(ValueError, match=rf"eval seed {eval_seed} \(--eval-seed; .* one of "
-                                             r"the training envs' seeds"):
+        with pytest.raises(ValueError, match=rf"eval seed {eval_seed} is one of the training "
+                                             r"envs' seeds .* choose another --eval-seed"):
             evaluate("Breakout", "1", policy=policy, episodes=1, eval_seed=eval_seed,
                      checkpoint=full / "checkpoint.pkl", progress=False)
 
@@ -456,6 +456,13 @@ def test_cli_train_refuses_to_overwrite_and_evaluates(uninterrupted, tmp_path, c
                  "--out", str(tmp_path), "--quiet"]) == 2
     assert "--seed 5 differs from the checkpoint's 0 (to evaluate on other seeds, give " \
         "--eval-seed)" in capsys.readouterr().err
+    # seed 10000's default eval seed, 20000, is a training env's: refused before training
+    assert main(["train", "ppo", "--game", "Breakout", "--seed", "10000", "--eval-episodes", "1",
+                 "--out", str(tmp_path / "s10000"), "--quiet"]) == 2
+    assert "eval seed 20000 is one of the training envs' seeds [20000, 20001] (training seed " \
+        "10000): the evaluation would replay training's episodes; train without " \
+        "--eval-episodes" in capsys.readouterr().err
+    assert not (tmp_path / "s10000" / "log.csv").exists()
 
 
 def test_cli_random_evaluation_spells_the_game_one_way_and_keeps_earlier_results(tmp_path,

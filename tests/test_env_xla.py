@@ -163,6 +163,21 @@ def test_xla_misuse_is_a_clear_error():
         step(handle, jnp.zeros(2, jnp.int32))
 
 
+def test_numpy_int64_actions_out_of_range_are_refused_with_x64_off():
+    """JAX's default (x64 off) casts a numpy int64 argument to int32 before tracing: the step
+    checks host values first, as env.step does (2**32 + 1 executed action 1)."""
+    with make("Breakout") as env:
+        env.reset()
+        handle, step = env.xla()
+        with pytest.raises(ValueError, match=r"actions out of range: .* got values "
+                                             r"0\.\.4294967297"):
+            step(handle, np.array([2 ** 32 + 1, 0]))
+        with pytest.raises(ValueError, match="actions must have shape"):
+            step(handle, [1, 2, 3])
+        handle, (*_, info) = step(handle, np.array([3, 1]))
+        np.testing.assert_array_equal(np.asarray(info["executed_action"])[:, -1], [3, 1])
+
+
 def test_64_bit_actions_out_of_range_are_refused_not_wrapped():
     """With jax_enable_x64, int64 2**32 + 1 cast to int32 is 1: the xla step refuses it as
     env.step does (it executed action 1)."""

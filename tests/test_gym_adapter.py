@@ -299,6 +299,29 @@ def test_reset_after_a_worker_died_makes_the_env_again_from_its_seed():
         fresh.close()
 
 
+def test_a_reset_with_a_seed_that_a_dead_worker_stopped_keeps_the_seed():
+    """reset(seed=5) that fails (its worker died) leaves the env on seed 5: the reset() after it
+    makes the env again from 5, not from the seed before."""
+    import os
+    import signal
+
+    kw = dict(num_envs=2, obs="ram", noop_max=30, num_workers=1)  # first obs depends on the seed
+    envs = gym.make_vec("stori_jax/Breakout-3.1-v0", **kw)
+    fresh = gym.make_vec("stori_jax/Breakout-3.1-v0", **kw)
+    try:
+        envs.reset()
+        os.kill(envs._env.backend.pids[0], signal.SIGKILL)
+        envs._env.backend.processes[0].join(5)
+        with pytest.raises(stori_jax.WorkerError, match="died"):
+            envs.reset(seed=5)
+        obs, _ = envs.reset()
+        assert envs._env.seed == 5
+        np.testing.assert_array_equal(obs, fresh.reset(seed=5)[0])
+    finally:
+        envs.close()
+        fresh.close()
+
+
 FORK_WHILE_JAX_IS_BUSY = """
 import os, threading, time, warnings
 warnings.simplefilter("ignore")  # JAX's warning about the fork
