@@ -25,7 +25,8 @@ def add_parsers(sub) -> None:
     train.add_argument("--set", dest="overrides", action="append", default=[],
                        metavar="FIELD=VALUE", help="any PPO hyperparameter, e.g. network=nips")
     train.add_argument("--eval-episodes", type=int, default=0,
-                       help="evaluate the final policy for this many episodes (0: not now)")
+                       help="evaluate the final policy for this many episodes (default 0: "
+                            "not now; stori-jax eval does it later)")
     train.add_argument("--quiet", action="store_true", help="no progress bar")
 
     ev = sub.add_parser("eval", help="the evaluation protocol: N episodes of a checkpoint's "
@@ -47,6 +48,9 @@ def add_parsers(sub) -> None:
     ev.add_argument("--num-envs", type=int, default=EVAL_NUM_ENVS,
                     help=f"envs the episodes are split over (default {EVAL_NUM_ENVS}, as the "
                          "recorded evaluations)")
+    ev.add_argument("--max-episode-frames", type=int, default=108_000,
+                    help="emulator frames after which an episode is cut off (truncated; "
+                         "default 108000, 30 minutes of play, as in training)")
     ev.add_argument("--out", type=Path, default=None,
                     help="directory for eval-<policy>.json (default: the checkpoint's, or "
                          "results/train/<game>-<preset>/random-seed<S>)")
@@ -132,15 +136,20 @@ def cmd_train(args) -> int:
             print(f"stori-jax: the last checkpoint is in {out}; continue with the same command "
                   "and --resume", file=sys.stderr)
         raise
-    print(f"trained {summary['agent_steps']} agent steps in {summary['train_seconds']:.0f} s "
-          f"({summary['train_sps']:.0f} steps/s); wrote {out}/log.csv, episodes.csv, "
-          "checkpoint.pkl, summary.json")
+    if summary["iterations_now"] == 0:
+        print(f"nothing to train: {out} holds a finished run of {summary['agent_steps']} agent "
+              "steps (a run trains to its --steps; a longer one starts in another --out)")
+    else:
+        print(f"trained {summary['agent_steps']} agent steps in "
+              f"{summary['train_seconds']:.0f} s ({summary['train_sps']:.0f} steps/s); wrote "
+              f"{out}/log.csv, episodes.csv, checkpoint.pkl, summary.json")
     if args.eval_episodes:
         result = evaluate(config.game, config.preset, policy="sampled", seed=config.seed,
                           episodes=args.eval_episodes, checkpoint=out / "checkpoint.pkl",
                           progress=not args.quiet)
         print(f"eval: mean return {result['mean_return']:.2f} over {args.eval_episodes} "
               f"episodes; wrote {write_result(result, out)}")
+        print_truncated(result)
     return 0
 
 
@@ -148,7 +157,7 @@ def cmd_eval(args) -> int:
     import stori_jax
     from baselines.evaluate import EVAL_SEED_OFFSET, evaluate, stori_game, write_result
     from baselines.ppo import load_checkpoint
-    from stori_jax.checks import MAX_SEED, check_int
+    from stori_jax.checks import MAX_INT32, MAX_SEED, check_int
     from stori_jax.cli import check_out
 
     if args.random == (args.checkpoint is not None):
@@ -156,7 +165,9 @@ def cmd_eval(args) -> int:
     for flag, value, minimum, maximum in (("--seed", args.seed, 0, MAX_SEED),
                                           ("--eval-seed", args.eval_seed, 0, MAX_SEED),
                                           ("--episodes", args.episodes, 1, None),
-                                          ("--num-envs", args.num_envs, 1, None)):
+                                          ("--num-envs", args.num_envs, 1, None),
+                                          ("--max-episode-frames", args.max_episode_frames, 1,
+                                           MAX_INT32)):
         if value is not None:
             check_int(flag, value, minimum, maximum)
     if args.random:
@@ -196,12 +207,22 @@ def cmd_eval(args) -> int:
               "episode plays the same (sampled evaluation varies)")
     result = evaluate(game, preset, policy=policy, episodes=args.episodes, seed=seed,
                       eval_seed=args.eval_seed, num_envs=args.num_envs, checkpoint=checkpoint,
-                      progress=not args.quiet)
+                      max_episode_frames=args.max_episode_frames, progress=not args.quiet)
     print(f"{game} {preset} {policy}: mean return {result['mean_return']:.2f} ± "
           f"{result['std_return']:.2f} (std over {args.episodes} "
           f"episode{'s' * (args.episodes != 1)}, eval seed "
           f"{result['eval_seed']}); wrote {write_result(result, out)}")
+    print_truncated(result)
     return 0
+
+
+def print_truncated(result: dict) -> None:
+    """Say so when episodes were cut off at the frame cap (a policy that never starts play, say
+    one that never presses FIRE in Breakout, plays each episode to the cap)."""
+    if result["truncated"]:
+        print(f"note: {result['truncated']} of {result['episodes']} episodes were cut off at "
+              f"{result['max_episode_frames']} frames (truncated; --max-episode-frames "
+              "lowers the cap)")
 
 
 def cmd_table(args) -> int:

@@ -83,6 +83,7 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
     quotas = episode_quotas(episodes, num_envs)
     returns = [[] for _ in range(num_envs)]
     lengths = [[] for _ in range(num_envs)]
+    cut_off = 0  # counted episodes truncated at max_episode_frames
     key = stori_jax.agent_key(eval_seed)  # not the env's own key chain
     start, agent_steps = time.perf_counter(), 0
     with stori_jax.make(game, preset, num_envs=num_envs, seed=eval_seed, obs="atari84",
@@ -96,13 +97,15 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
             agent_steps += num_envs
             if agent_steps % (STEPS_SHOWN_EVERY * num_envs) == 0:  # long episodes show progress
                 bar.set_postfix_str(f"{agent_steps} agent steps")
-            done = np.flatnonzero(np.asarray(terminated | truncated))
+            truncated = np.asarray(truncated)
+            done = np.flatnonzero(np.asarray(terminated) | truncated)
             if done.size:
                 ret, length = np.asarray(info["episode_return"]), np.asarray(info["episode_length"])
                 for i in done:
                     if len(returns[i]) < quotas[i]:
                         returns[i].append(float(ret[i]))
                         lengths[i].append(int(length[i]))
+                        cut_off += bool(truncated[i])
                         bar.update()
         bar.close()
     flat = [r for env_returns in returns for r in env_returns]
@@ -112,6 +115,7 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
                 checkpoint=None if checkpoint is None else str(checkpoint),
                 mean_return=float(np.mean(flat)), std_return=float(np.std(flat)),
                 returns=flat, lengths=[n for env_lengths in lengths for n in env_lengths],
+                truncated=cut_off,
                 agent_steps=agent_steps, seconds=time.perf_counter() - start)
 
 

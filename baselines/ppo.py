@@ -598,7 +598,7 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
                    train_sps=last * config.batch_size / max(elapsed, 1e-9))
     if summary["finished"]:
         (out / "summary.json").write_text(json.dumps(summary, indent=1))
-    return summary
+    return dict(summary, iterations_now=last - start)  # 0: a resumed run had finished
 
 
 def env_only_sps(config: PPOConfig, agent_steps: int = 2048) -> float:

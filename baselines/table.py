@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import json
+import sys
 import warnings
 from collections import defaultdict
 from pathlib import Path
@@ -175,8 +176,9 @@ def markdown(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def learning_curves(results_dir: Path) -> dict[tuple[str, str], list[tuple[np.ndarray, ...]]]:
-    """Per (game, preset), per training run: (global_step, episode return) of every episode."""
+def learning_curves(results_dir: Path) -> dict[tuple[str, str], list[tuple]]:
+    """Per (game, preset), per training run: (global_step and return of every episode, seed,
+    the run's last agent step, its config)."""
     curves = defaultdict(list)
     for path in sorted(Path(results_dir).rglob("episodes.csv")):
         config_path = path.parent / "config.json"
@@ -198,21 +200,61 @@ def learning_curves(results_dir: Path) -> dict[tuple[str, str], list[tuple[np.nd
             returns = np.array([float(r["return"]) for r in rows])
         except (TypeError, ValueError) as e:  # TypeError: a row shorter than the header
             raise ValueError(f"{path}: a global_step or return is not a number ({e})") from None
-        curves[(config["game"], config["preset"])].append((steps, returns, config["seed"]))
+        curves[(config["game"], config["preset"])].append(
+            (steps, returns, config["seed"], _last_step(path.parent, steps), config))
     for runs in curves.values():
         runs.sort(key=lambda run: run[2])
     return curves
 
 
-def smoothed(steps: np.ndarray, returns: np.ndarray, grid: np.ndarray, window: int) -> np.ndarray:
+def _last_step(run_dir: Path, steps: np.ndarray) -> int:
+    """How far a run trained: its log's last global_step (its last episode's, without a log)."""
+    end = int(steps.max()) if steps.size else 0
+    try:
+        with open(run_dir / "log.csv", newline="") as f:
+            rows = list(csv.DictReader(f))
+        return max(end, int(rows[-1]["global_step"])) if rows else end
+    except (OSError, KeyError, TypeError, ValueError):  # no log, or not one of ours
+        return end
+
+
+def smoothed(steps: np.ndarray, returns: np.ndarray, grid: np.ndarray, window: int,
+             end: float = np.inf) -> np.ndarray:
     """Mean return of the ``window`` latest episodes finished by each grid step (NaN before
-    the first)."""
+    the first, and past ``end``, where the run stopped)."""
     out = np.full(grid.shape, np.nan)
     for j, g in enumerate(grid):
         done = returns[steps <= g]
-        if done.size:
+        if done.size and g <= end:
             out[j] = done[-window:].mean()
     return out
+
+
+def _steps_label(value: float, _position) -> str:
+    """An axis label of agent steps: 50k, 1.5M (full numbers overlap on a narrow panel)."""
+    if abs(value) >= 1e6:
+        return f"{value / 1e6:g}M"
+    return f"{value / 1e3:g}k" if abs(value) >= 1e3 else f"{value:g}"
+
+
+def table_notes(curves: dict, evaluations: list[dict], ppo_policy: str) -> list[str]:
+    """What a reader of the table and the curves should know: training runs the table leaves
+    out (no evaluation of ``ppo_policy``), and runs pooled in one panel with different
+    hyperparameters."""
+    evaluated = {(e["game"], e["preset"], e.get("train_seed")) for e in evaluations
+                 if e["agent"] == "ppo" and e.get("policy") == ppo_policy}
+    notes = []
+    for (game, preset), runs in sorted(curves.items(), key=lambda kv: _order(*kv[0])):
+        left_out = [seed for *_, seed, _, _ in runs if (game, preset, seed) not in evaluated]
+        if left_out:
+            notes.append(f"{game} {preset}: seed(s) {left_out} have no eval-{ppo_policy}.json: "
+                         "in the curves, not in the table")
+        settings = {json.dumps({k: v for k, v in config.items() if k != "seed"}, sort_keys=True)
+                    for *_, config in runs}
+        if len(settings) > 1:
+            notes.append(f"{game} {preset}: the curves pool runs with different hyperparameters "
+                         "(their config.json files differ beyond the seed)")
+    return notes
 
 
 def plot_curves(curves: dict, evaluations: list[dict], out_dir: Path,
@@ -223,6 +265,7 @@ def plot_curves(curves: dict, evaluations: list[dict], out_dir: Path,
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
 
     random_means = defaultdict(list)
     for e in evaluations:
@@ -235,22 +278,24 @@ def plot_curves(curves: dict, evaluations: list[dict], out_dir: Path,
                                  squeeze=False, sharey=True)
         for ax, preset in zip(axes[0], presets):
             runs = curves[(game, preset)]
-            end = max(int(s.max()) if s.size else 0 for s, _, _ in runs)
-            grid = np.linspace(0, max(end, 1), 100)
+            ends = [end for *_, end, _ in runs]
+            grid = np.linspace(0, max(max(ends), 1), 100)
             lines = []
-            for steps, returns, seed in runs:
-                line = smoothed(steps, returns, grid, window)
+            for steps, returns, seed, end, _ in runs:
+                line = smoothed(steps, returns, grid, window, end)
                 lines.append(line)
                 ax.plot(grid, line, lw=0.8, alpha=0.5, label=f"seed {seed}")
             with warnings.catch_warnings():  # grid points before any seed's first episode
                 warnings.simplefilter("ignore", RuntimeWarning)
                 mean = np.nanmean(np.array(lines), axis=0)
+            mean[grid > min(ends)] = np.nan  # a mean over every seed, or none
             ax.plot(grid, mean, color="black", lw=1.6, label="mean over seeds")
             if random_means.get((game, preset)):
                 ax.axhline(np.mean(random_means[(game, preset)]), color="grey", ls="--",
                            label="random policy (eval)")
             ax.set_title(f"{game} {preset}")
             ax.set_xlabel("agent steps")
+            ax.xaxis.set_major_formatter(FuncFormatter(_steps_label))
             ax.grid(alpha=0.3)
         axes[0][0].set_ylabel(f"episode return (mean of last {window})")
         axes[0][-1].legend(fontsize=7)
@@ -272,6 +317,8 @@ def build_table(results_dir: Path, out_dir: Path | None = None,
     evaluations = load_evaluations(results_dir)
     curves = learning_curves(results_dir)  # read (and checked) before anything is written
     rows = aggregate(evaluations, ppo_policy)
+    for note in table_notes(curves, evaluations, ppo_policy):
+        print(f"stori-jax table: note: {note}", file=sys.stderr)
     text = markdown(rows)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "table.md").write_text(text)

@@ -15,8 +15,8 @@ import pytest
 import stori_jax
 from baselines import ppo
 from baselines.evaluate import evaluate, write_result
-from baselines.table import (PAPER_RESULTS, aggregate, build_table, load_evaluations, markdown,
-                             smoothed)
+from baselines.table import (PAPER_RESULTS, aggregate, build_table, learning_curves,
+                             load_evaluations, markdown, smoothed)
 from stori_jax.cli import main
 from stori_jax.suite import episode_quotas
 
@@ -219,12 +219,25 @@ def test_resume_reproduces_the_uninterrupted_run(uninterrupted, tmp_path):
     partial = ppo.train(tiny(), tmp_path, progress=False, stop_after=1)
     assert not partial["finished"] and not (tmp_path / "summary.json").exists()
     assert len(read_log(tmp_path)) == 1
-    ppo.train(tiny(), tmp_path, resume=True, progress=False)
+    assert ppo.train(tiny(), tmp_path, resume=True, progress=False)["iterations_now"] == 2
     assert read_log(tmp_path) == read_log(full)
     assert (tmp_path / "episodes.csv").read_text() == (full / "episodes.csv").read_text()
     a, b = read_checkpoint(full), read_checkpoint(tmp_path)
     assert_trees_equal((a["params"], a["opt_state"], a["key"], a["obs"]),
                        (b["params"], b["opt_state"], b["key"], b["obs"]))
+
+
+def test_resuming_a_finished_run_says_there_is_nothing_to_train(uninterrupted, capsys):
+    """It printed 'trained 192 agent steps in 6 s' and trained nothing."""
+    full, _ = uninterrupted
+    log = read_log(full)
+    settings = [a for k, v in TINY.items() if k not in ("game", "preset", "total_steps")
+                for a in ("--set", f"{k}={v}")]
+    assert main(["train", "ppo", "--game", "Breakout", "--preset", "1", "--steps", "192",
+                 *settings, "--out", str(full), "--resume", "--quiet"]) == 0
+    assert f"nothing to train: {full} holds a finished run of 192 agent steps" in \
+        capsys.readouterr().out
+    assert read_log(full) == log
 
 
 def test_same_seed_same_updates_other_seed_others(uninterrupted, tmp_path):
@@ -406,6 +419,32 @@ def test_smoothing_is_the_mean_of_the_latest_episodes():
     assert np.isnan(out[0]) and out[1] == 1.5 and out[2] == 4.0
 
 
+def test_curves_stop_where_a_run_stopped_and_the_table_names_what_it_leaves_out(tmp_path,
+                                                                                 capsys):
+    """A short run's curve was drawn flat to the longest run's end (and pulled the mean
+    down); training runs without an evaluation were in the curves but silently not in the
+    table; runs of different hyperparameters were pooled without a word."""
+    for seed, last, lr in ((0, 1000, 2.5e-4), (1, 8000, 1e-3)):
+        run = tmp_path / "Breakout-2.1" / f"ppo-seed{seed}"
+        run.mkdir(parents=True)
+        (run / "config.json").write_text(json.dumps(dict(game="Breakout", preset="2.1",
+                                                         seed=seed, learning_rate=lr)))
+        (run / "episodes.csv").write_text(f"global_step,env,return,length\n500,0,1.0,5\n"
+                                          f"{last - 100},1,3.0,9\n")
+        (run / "log.csv").write_text(f"iteration,global_step\n1,{last}\n")
+    fake_eval(tmp_path, "Breakout", "2.1", "ppo", 1, 2.0)
+    build_table(tmp_path, tmp_path / "out")
+    err = capsys.readouterr().err
+    assert "Breakout 2.1: seed(s) [0] have no eval-sampled.json: in the curves, not in the " \
+        "table" in err
+    assert "Breakout 2.1: the curves pool runs with different hyperparameters" in err
+    short = next(run for run in learning_curves(tmp_path)[("Breakout", "2.1")] if run[2] == 0)
+    steps, returns, _, end, _ = short
+    assert end == 1000  # the log's last step, past the last episode's
+    line = smoothed(steps, returns, np.array([600.0, 1000.0, 5000.0]), 20, end)
+    assert line[0] == 1.0 and line[1] == 2.0 and np.isnan(line[2])
+
+
 # -- the command line -------------------------------------------------------------------------
 
 @pytest.mark.parametrize("argv,match", [
@@ -463,6 +502,21 @@ def test_cli_train_refuses_to_overwrite_and_evaluates(uninterrupted, tmp_path, c
         "10000): the evaluation would replay training's episodes; train without " \
         "--eval-episodes" in capsys.readouterr().err
     assert not (tmp_path / "s10000" / "log.csv").exists()
+
+
+def test_eval_counts_and_reports_episodes_cut_off_at_the_frame_cap(tmp_path, capsys):
+    """A greedy Breakout policy that never fires played every episode to 108000 frames, and
+    eval printed a mean of 0 with no word of it."""
+    assert main(["eval", "--random", "--game", "Breakout", "--preset", "3.1", "--episodes", "2",
+                 "--num-envs", "2", "--max-episode-frames", "40", "--out", str(tmp_path),
+                 "--quiet"]) == 0
+    result = json.loads((tmp_path / "eval-random.json").read_text())
+    assert result["truncated"] == 2 and result["lengths"] == [10, 10]
+    assert "note: 2 of 2 episodes were cut off at 40 frames (truncated; --max-episode-frames " \
+        "lowers the cap)" in capsys.readouterr().out
+    assert main(["eval", "--random", "--game", "Breakout", "--preset", "3.1",
+                 "--max-episode-frames", "0", "--out", str(tmp_path), "--quiet"]) == 2
+    assert "--max-episode-frames must be" in capsys.readouterr().err
 
 
 def test_cli_random_evaluation_spells_the_game_one_way_and_keeps_earlier_results(tmp_path,
