@@ -159,6 +159,7 @@ def cmd_eval(args) -> int:
     from baselines.ppo import load_checkpoint
     from stori_jax.checks import MAX_INT32, MAX_SEED, check_int
     from stori_jax.cli import check_out
+    from stori_jax.presets import canonical_preset
 
     if args.random == (args.checkpoint is not None):
         raise ValueError("give either --checkpoint PATH or --random (with --game and --preset)")
@@ -176,16 +177,18 @@ def cmd_eval(args) -> int:
         if args.policy is not None:
             raise ValueError("--policy applies to checkpoints only (--random plays the random "
                              "policy)")
-        game = stori_game(args.game)  # one spelling per game in the run folders
-        preset, seed, policy = args.preset, args.seed or 0, "random"
+        game = stori_game(args.game)  # one spelling per game (and preset) in the run folders
+        preset, seed, policy = canonical_preset(game, args.preset), args.seed or 0, "random"
         out = args.out or run_dir(DEFAULT_ROOT, game, preset, "random", seed)
         checkpoint = None
     else:
         config = load_checkpoint(args.checkpoint)["config"]
         game = args.game if args.game is None else stori_game(args.game)
+        preset = (args.preset if args.preset is None
+                  else canonical_preset(game or config["game"], args.preset))
         # the training seed labels the result (and the table's seed column): it is the checkpoint's
         for flag, value, trained in (("--game", game, stori_game(config["game"])),
-                                     ("--preset", args.preset, config["preset"]),
+                                     ("--preset", preset, config["preset"]),
                                      ("--seed", args.seed, config["seed"])):
             if value is not None and value != trained:
                 raise ValueError(f"{flag} {value} differs from the checkpoint's {trained}"

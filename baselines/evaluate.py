@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from stori_jax.checks import check_int
+from stori_jax.presets import canonical_preset
 from stori_jax.suite import episode_quotas
 
 CHECKPOINT_POLICIES = ("sampled", "greedy")  # how a trained policy acts
@@ -63,7 +64,8 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
         raise ValueError("give a checkpoint for the 'sampled' and 'greedy' policies, and none "
                          "for 'random'")
     episodes, num_envs = check_int("episodes", episodes, 1), check_int("num_envs", num_envs, 1)
-    game = stori_game(game)  # one spelling per game in the results
+    game = stori_game(game)  # one spelling per game (and preset) in the results
+    preset = canonical_preset(game, preset)
     eval_seed = seed + EVAL_SEED_OFFSET if eval_seed is None else eval_seed
     num_envs = min(num_envs, episodes)
     if checkpoint is not None:

@@ -30,6 +30,7 @@ import optax
 from baselines.evaluate import CHECKPOINT_POLICIES, stori_game
 from stori_jax.checks import check_int, check_real
 from stori_jax.core import agent_key
+from stori_jax.presets import canonical_preset
 
 NETWORKS = ("nature", "nips", "tiny")
 ACTION_HEADS = ("joint", "factored")
@@ -90,7 +91,8 @@ class PPOConfig:
         import stori_jax
 
         object.__setattr__(self, "game", stori_game(self.game))
-        stori_jax.preset(self.game, self.preset)  # unknown preset: a clear ValueError
+        # one spelling per preset in the results; an unknown preset: a clear ValueError
+        object.__setattr__(self, "preset", canonical_preset(self.game, self.preset))
         for name in ("seed", "total_steps", "num_envs", "num_steps", "num_minibatches",
                      "update_epochs", "checkpoint_every", "augment_shift"):
             minimum = 0 if name in ("seed", "augment_shift") else 1

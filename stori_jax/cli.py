@@ -107,10 +107,12 @@ def _selected_presets(games, presets):
     in_games = [(g, n) for g, n in list_presets()
                 if not games or g.lower() in {x.lower() for x in games}]
     allowed = list(dict.fromkeys(n for _, n in in_games))
-    unknown = [n for n in presets or [] if n not in allowed]
+    spelt = {n.lower(): n for n in allowed}  # preset names match whatever their case
+    unknown = [n for n in presets or [] if n.lower() not in spelt]
     if unknown:
         raise ValueError(f"--presets: unknown {unknown}; allowed"
                          f"{' for ' + ' '.join(games) if games else ''}: {allowed}")
+    presets = presets and [spelt[n.lower()] for n in presets]
     chosen = [(g, n) for g, n in in_games if not presets or n in presets]
     if not chosen:
         raise ValueError(f"no paper preset matches --games {games} --presets {presets}")
@@ -145,13 +147,15 @@ def _config_for(args):
     import json
 
     import stori_jax
+    from stori_jax.presets import canonical_preset
 
     if args.preset is not None and args.config is not None:
         raise ValueError("give a PRESET or --config FILE (a reference-format JSON), not both")
     if args.preset is None and args.config is None:  # as `run`: 3.1, for any ale-py game
         return "3.1", stori_jax.Config()
     if args.preset is not None:
-        return args.preset, stori_jax.preset(args.game, args.preset)
+        name = canonical_preset(args.game, args.preset)
+        return name, stori_jax.preset(args.game, name)
     path = Path(args.config)
     if not path.is_file():
         raise ValueError(f"--config {path}: " + ("is a directory, not a JSON file"

@@ -69,20 +69,27 @@ def _canonical_game(game: str) -> str:
                      "takes no preset, which plays it as 3.1, or a Config)")
 
 
+def canonical_preset(game: str, name: str) -> str:
+    """Preset ``name`` of ``game`` spelt as the paper does ("3.2a" -> "3.2A"), as game names
+    are matched whatever their case; an unknown one is a ValueError naming the allowed ones."""
+    game = _canonical_game(game)
+    names = [n for g, n in _PRESETS if g == game]
+    if not isinstance(name, str):
+        raise ValueError(f"preset must be a name (a string) of {game}: allowed {names}, got "
+                         f"{name!r} ({type(name).__name__})")
+    for n in names:
+        if n.lower() == name.lower():
+            return n
+    raise ValueError(f"unknown preset {name!r} for {game}: allowed {names}")
+
+
 def preset(game: str, name: str) -> Config:
     """The Config of paper preset ``name`` of ``game``, e.g. preset("Breakout", "3.2A")."""
     game = _canonical_game(game)
-    key = (game, name)
-    if not isinstance(name, str) or key not in _PRESETS:
-        names = [n for g, n in _PRESETS if g == game]
-        if not isinstance(name, str):
-            raise ValueError(f"preset must be a name (a string) of {game}: allowed {names}, got "
-                             f"{name!r} ({type(name).__name__})")
-        raise ValueError(f"unknown preset {name!r} for {game}: allowed {names}")
-    return _PRESETS[key][1].for_game(game)
+    return _PRESETS[(game, canonical_preset(game, name))][1].for_game(game)
 
 
 def describe_preset(game: str, name: str) -> str:
     """The paper's definition of a preset, in words."""
-    preset(game, name)  # validates
-    return _PRESETS[(_canonical_game(game), name)][0]
+    game = _canonical_game(game)
+    return _PRESETS[(game, canonical_preset(game, name))][0]

@@ -102,6 +102,26 @@ def test_preset_details():
         assert get_game(game).replacement_actions(noise) == actions
 
 
+def test_preset_names_match_whatever_their_case_as_game_names_do(tmp_path, capsys):
+    """'3.2a' was refused while 'breakout' was accepted; every entry point now spells it as
+    the paper does."""
+    import stori_jax
+    from baselines.ppo import PPOConfig
+    from stori_jax.cli import main
+    from stori_jax.presets import canonical_preset
+
+    assert canonical_preset("breakout", "3.2a") == "3.2A"
+    assert preset("Breakout", "3.2a") == preset("Breakout", "3.2A")
+    assert describe_preset("boxing", "3.2c") == describe_preset("Boxing", "3.2C")
+    assert PPOConfig(game="breakout", preset="3.2c").preset == "3.2C"
+    with stori_jax.make("Breakout", "3.2b", num_envs=1, seed=0, num_workers=0) as env:
+        assert env.config == preset("Breakout", "3.2B")
+    assert main(["suite", "--games", "Boxing", "--presets", "3.2c", "--episodes", "1",
+                 "--num-envs", "1", "--max-steps", "2", "--no-gallery", "--quiet",
+                 "--out", str(tmp_path)]) == 0
+    assert "| Boxing | 3.2C |" in (tmp_path / "table.md").read_text()
+
+
 def test_unknown_preset_and_game():
     with pytest.raises(ValueError, match=r"unknown preset '3\.2A' for Gopher: allowed "
                                          r"\['1', '2\.1', '2\.2', '3\.1', '3\.2'\]"):
