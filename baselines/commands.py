@@ -184,12 +184,15 @@ def cmd_eval(args) -> int:
     else:
         config = load_checkpoint(args.checkpoint)["config"]
         game = args.game if args.game is None else stori_game(args.game)
-        preset = (args.preset if args.preset is None
-                  else canonical_preset(game or config["game"], args.preset))
         # the training seed labels the result (and the table's seed column): it is the checkpoint's
         for flag, value, trained in (("--game", game, stori_game(config["game"])),
-                                     ("--preset", preset, config["preset"]),
+                                     ("--preset", args.preset, config["preset"]),
                                      ("--seed", args.seed, config["seed"])):
+            if flag == "--preset" and value is not None:  # the checkpoint's game is the one
+                try:
+                    value = canonical_preset(config["game"], value)
+                except ValueError as error:
+                    raise ValueError(f"--preset: {error}") from None
             if value is not None and value != trained:
                 raise ValueError(f"{flag} {value} differs from the checkpoint's {trained}"
                                  + (" (to evaluate on other seeds, give --eval-seed)"

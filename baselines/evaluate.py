@@ -85,7 +85,7 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
     quotas = episode_quotas(episodes, num_envs)
     returns = [[] for _ in range(num_envs)]
     lengths = [[] for _ in range(num_envs)]
-    cut_off = 0  # counted episodes truncated at max_episode_frames
+    cut_off = 0  # counted episodes cut off at max_episode_frames before the game ended
     key = stori_jax.agent_key(eval_seed)  # not the env's own key chain
     start, agent_steps = time.perf_counter(), 0
     with stori_jax.make(game, preset, num_envs=num_envs, seed=eval_seed, obs="atari84",
@@ -99,15 +99,16 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
             agent_steps += num_envs
             if agent_steps % (STEPS_SHOWN_EVERY * num_envs) == 0:  # long episodes show progress
                 bar.set_postfix_str(f"{agent_steps} agent steps")
-            truncated = np.asarray(truncated)
-            done = np.flatnonzero(np.asarray(terminated) | truncated)
+            terminated, truncated = np.asarray(terminated), np.asarray(truncated)
+            done = np.flatnonzero(terminated | truncated)
             if done.size:
                 ret, length = np.asarray(info["episode_return"]), np.asarray(info["episode_length"])
                 for i in done:
                     if len(returns[i]) < quotas[i]:
                         returns[i].append(float(ret[i]))
                         lengths[i].append(int(length[i]))
-                        cut_off += bool(truncated[i])
+                        cut_off += bool(truncated[i] and not terminated[i])  # the game
+                        #                         may end on the very step that reaches the cap
                         bar.update()
         bar.close()
     flat = [r for env_returns in returns for r in env_returns]

@@ -10,9 +10,9 @@ RESULTS_DIR.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import sys
-import warnings
 from collections import defaultdict
 from pathlib import Path
 
@@ -20,6 +20,7 @@ import numpy as np
 
 from baselines.evaluate import CHECKPOINT_POLICIES, stori_game
 from stori_jax.checks import check_int, check_real
+from stori_jax.presets import canonical_preset
 
 # STORI_SPEC section 11: mean evaluation return ± std over seeds 0, 7, 13 at 100k agent steps
 PAPER_RESULTS = {  # (game, preset): (DreamerV3 mean, std, STORM mean, std)
@@ -98,8 +99,10 @@ def load_evaluations(results_dir: Path) -> list[dict]:
     for path in sorted(results_dir.rglob("eval-*.json")):
         result = _read_json_object(path, "a stori-jax evaluation")
         _check_evaluation(path, result)
-        # one spelling per game, so that files written as 'breakout' join the Breakout row
-        found.append(dict(result, game=stori_game(result["game"]), path=str(path)))
+        # one spelling per game and preset, so that 'breakout' '3.2c' joins Breakout 3.2C
+        game = stori_game(result["game"])
+        found.append(dict(result, game=game, preset=canonical_preset(game, result["preset"]),
+                          path=str(path)))
     if not found:
         raise ValueError(f"no eval-*.json under {results_dir}: run `stori-jax eval` first")
     return found
@@ -200,7 +203,8 @@ def learning_curves(results_dir: Path) -> dict[tuple[str, str], list[tuple]]:
             returns = np.array([float(r["return"]) for r in rows])
         except (TypeError, ValueError) as e:  # TypeError: a row shorter than the header
             raise ValueError(f"{path}: a global_step or return is not a number ({e})") from None
-        curves[(config["game"], config["preset"])].append(
+        game = stori_game(config["game"])
+        curves[(game, canonical_preset(game, config["preset"]))].append(
             (steps, returns, config["seed"], _last_step(path.parent, steps), config))
     for runs in curves.values():
         runs.sort(key=lambda run: run[2])
@@ -237,6 +241,18 @@ def _steps_label(value: float, _position) -> str:
     return f"{value / 1e3:g}k" if abs(value) >= 1e3 else f"{value:g}"
 
 
+def _hyperparameters(config: dict) -> dict:
+    """A run's config as training read it (a field that an older run's config.json lacks is
+    its default), without what does not change the training: the seed, the checkpoints."""
+    from baselines.ppo import PPOConfig
+
+    try:
+        config = dataclasses.asdict(PPOConfig.from_recorded(config))
+    except (TypeError, ValueError):  # not one of ours: compare it as written
+        pass
+    return {k: v for k, v in config.items() if k not in ("seed", "checkpoint_every")}
+
+
 def table_notes(curves: dict, evaluations: list[dict], ppo_policy: str) -> list[str]:
     """What a reader of the table and the curves should know: training runs the table leaves
     out (no evaluation of ``ppo_policy``), and runs pooled in one panel with different
@@ -249,8 +265,7 @@ def table_notes(curves: dict, evaluations: list[dict], ppo_policy: str) -> list[
         if left_out:
             notes.append(f"{game} {preset}: seed(s) {left_out} have no eval-{ppo_policy}.json: "
                          "in the curves, not in the table")
-        settings = {json.dumps({k: v for k, v in config.items() if k != "seed"}, sort_keys=True)
-                    for *_, config in runs}
+        settings = {json.dumps(_hyperparameters(config), sort_keys=True) for *_, config in runs}
         if len(settings) > 1:
             notes.append(f"{game} {preset}: the curves pool runs with different hyperparameters "
                          "(their config.json files differ beyond the seed)")
@@ -285,10 +300,7 @@ def plot_curves(curves: dict, evaluations: list[dict], out_dir: Path,
                 line = smoothed(steps, returns, grid, window, end)
                 lines.append(line)
                 ax.plot(grid, line, lw=0.8, alpha=0.5, label=f"seed {seed}")
-            with warnings.catch_warnings():  # grid points before any seed's first episode
-                warnings.simplefilter("ignore", RuntimeWarning)
-                mean = np.nanmean(np.array(lines), axis=0)
-            mean[grid > min(ends)] = np.nan  # a mean over every seed, or none
+            mean = np.mean(np.array(lines), axis=0)  # NaN where a seed has no data: none
             ax.plot(grid, mean, color="black", lw=1.6, label="mean over seeds")
             if random_means.get((game, preset)):
                 ax.axhline(np.mean(random_means[(game, preset)]), color="grey", ls="--",

@@ -25,13 +25,14 @@ def stori_games(parser: argparse.ArgumentParser, flag: str, names: list[str]) ->
         parser.error(f"{flag}: {error}")
 
 
-def stori_game_and_preset(parser: argparse.ArgumentParser, game: str, preset: str) -> str:
-    """The STORI game ``game`` names, spelt canonically, after checking it has ``preset``."""
-    import stori_jax
+def stori_game_and_preset(parser: argparse.ArgumentParser, game: str,
+                          preset: str) -> tuple[str, str]:
+    """(game, preset) spelt as the paper does ('breakout', '3.2a': Breakout, 3.2A), after
+    checking that the game has that preset."""
+    from stori_jax.presets import canonical_preset
 
     game = stori_games(parser, "--game", [game])[0]
     try:
-        stori_jax.preset(game, preset)
+        return game, canonical_preset(game, preset)
     except ValueError as error:
         parser.error(f"--preset: {error}")
-    return game

@@ -139,7 +139,7 @@ def main(argv=None) -> None:
     parser.add_argument("--out", type=Path, default=RESULTS, help="directory for the results")
     args = parser.parse_args(argv)
     require_at_least_one(parser, repeats=args.repeats)
-    game = stori_game_and_preset(parser, args.game, args.preset)
+    game, args.preset = stori_game_and_preset(parser, args.game, args.preset)
     config = ppo.PPOConfig(game=game, preset=args.preset,
                            **{**GAME_HYPERPARAMETERS.get(game, EVIDENCE_HYPERPARAMETERS),
                               "network": args.network})

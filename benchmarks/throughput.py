@@ -404,9 +404,12 @@ def _check_arguments(parser, args):
     if args.games is not None:
         args.games = stori_games(parser, "--games", args.games)
     names = sorted({p for _, p in stori_jax.list_presets()})
+    spelt = {name.lower(): name for name in names}  # preset names match whatever their case
     for preset in args.presets or ():
-        if preset not in names:
+        if preset.lower() not in spelt:
             parser.error(f"--presets: {preset!r} is not one of {names}")
+    if args.presets is not None:
+        args.presets = [spelt[preset.lower()] for preset in args.presets]
 
 
 def main(argv=None):

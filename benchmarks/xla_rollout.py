@@ -90,7 +90,7 @@ def main(argv=None) -> None:
     parser.add_argument("--out", type=Path, default=RESULTS, help="directory for the results")
     args = parser.parse_args(argv)
     require_at_least_one(parser, sizes=args.sizes, steps=args.steps, repeats=args.repeats)
-    args.game = stori_game_and_preset(parser, args.game, args.preset)
+    args.game, args.preset = stori_game_and_preset(parser, args.game, args.preset)
     rows = [measure(args.game, args.preset, b, args.steps, args.repeats)
             for b in tqdm(args.sizes, desc="batch sizes")]
     text = markdown(args.game, args.preset, args.steps, rows)

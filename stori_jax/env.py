@@ -468,7 +468,8 @@ class Env:
         """``(handle, step)``: stepping inside ``jax.jit``, as envpool's xla handle.
 
         ``step(handle, actions) -> (handle, (obs, reward, terminated, truncated, info))`` is a
-        jitted pure function that can sit inside the caller's ``jit`` and ``jax.lax.scan``
+        pure function (jitted inside; host actions, numpy or a list, are checked on the way in)
+        that can sit inside the caller's ``jit`` and ``jax.lax.scan``
         (not ``vmap``: the batch is already the envs).  It gives exactly what :meth:`step`
         gives.  Each handle steps once: pass on the one the step returns.  Take it from a
         settled env (after ``reset()``, nothing in flight); from then on the env is stepped

@@ -53,6 +53,18 @@ def _first_env_info(info: dict) -> dict:
     return jax.tree.map(lambda v: _numpy(v[0]), info)
 
 
+def _names(game, preset, registered: tuple[str, str]) -> bool:
+    """``game`` and ``preset`` name the registered pair, whatever their case."""
+    import stori_jax
+    from stori_jax.presets import canonical_preset
+
+    try:
+        return (stori_jax.get_game(game).name,
+                canonical_preset(registered[0], preset)) == registered
+    except ValueError:
+        return False
+
+
 class _Owner:
     """Holds one stori_jax Env (made again only after a worker died)."""
 
@@ -64,7 +76,7 @@ class _Owner:
             raise ValueError(f"config: the id {env_id(*registered)} fixes the preset; for a "
                              "Config of your own use stori_jax.gym_adapter.StoriGymEnv(game, "
                              "config=...) or StoriVectorEnv(num_envs, game, config=...)")
-        if registered is not None and (game, preset) != registered:
+        if registered is not None and not _names(game, preset, registered):
             raise ValueError(f"this id is {env_id(*registered)}: it fixes game and preset, got "
                              f"game={game!r} preset={preset!r}; use that preset's own id")
         if make_kwargs.pop("render_mode", None) is not None:

@@ -105,8 +105,9 @@ def make_step(plan, emulate):
     def step(handle, actions):
         if not isinstance(actions, jax.Array):
             # a host value (numpy, a list): with x64 off (JAX's default) jit casts a 64-bit one
-            # to int32 before tracing, wrapping 2**32 + 1 to 1; check it as env.step does
-            check_actions(actions, plan.num_envs, plan.num_actions)
+            # to int32 before tracing, wrapping 2**32 + 1 to 1; check it as env.step does (and
+            # pass one int32 array on: jit would take a list for a pytree of scalars)
+            actions = check_actions(actions, plan.num_envs, plan.num_actions)
         return jitted(handle, actions)
 
     return step

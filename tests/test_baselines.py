@@ -4,6 +4,7 @@ tiny networks and budgets."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import pickle
 
@@ -324,6 +325,14 @@ def fake_eval(root, game, preset, agent, seed, mean, policy=None):
                  f"{agent}-seed{seed}")
 
 
+def test_the_table_joins_a_preset_spelt_in_lower_case_to_its_row(tmp_path):
+    for seed, preset in ((0, "3.2C"), (7, "3.2c")):
+        fake_eval(tmp_path, "Breakout", preset, "ppo", seed, 2.0 * seed)
+    text, _ = build_table(tmp_path, tmp_path / "out")
+    assert [line.split(" | ")[:3] for line in text.splitlines()[2:]] == [
+        ["| Breakout", "3.2C", "7.00 ± 9.90"]]
+
+
 def test_table_aggregates_seeds_beside_the_paper(tmp_path):
     for seed, mean in ((0, 1.0), (7, 2.0), (13, 3.0)):
         fake_eval(tmp_path, "Breakout", "3.1", "ppo", seed, mean)
@@ -438,6 +447,18 @@ def test_curves_stop_where_a_run_stopped_and_the_table_names_what_it_leaves_out(
     assert "Breakout 2.1: seed(s) [0] have no eval-sampled.json: in the curves, not in the " \
         "table" in err
     assert "Breakout 2.1: the curves pool runs with different hyperparameters" in err
+    # a config.json written before a field existed is that field's default, not another config
+    for seed in (2, 3):
+        run = tmp_path / "Boxing-3.1" / f"ppo-seed{seed}"
+        run.mkdir(parents=True)
+        recorded = dataclasses.asdict(ppo.PPOConfig(game="Boxing", seed=seed))
+        if seed == 2:
+            del recorded["action_head"], recorded["augment_shift"]
+        (run / "config.json").write_text(json.dumps(recorded))
+        (run / "episodes.csv").write_text("global_step,env,return,length\n64,0,1.0,5\n")
+        fake_eval(tmp_path, "Boxing", "3.1", "ppo", seed, 1.0)
+    build_table(tmp_path, tmp_path / "out")
+    assert "Boxing 3.1" not in capsys.readouterr().err
     short = next(run for run in learning_curves(tmp_path)[("Breakout", "2.1")] if run[2] == 0)
     steps, returns, _, end, _ = short
     assert end == 1000  # the log's last step, past the last episode's
@@ -491,6 +512,13 @@ def test_cli_train_refuses_to_overwrite_and_evaluates(uninterrupted, tmp_path, c
                  "--policy", "greedy", "--num-envs", "1", "--out", str(tmp_path), "--quiet",
                  "--preset", "3.1", "--game", "breakout"]) == 2
     assert "--preset 3.1 differs from the checkpoint" in capsys.readouterr().err  # not --game
+    for flags, error in ((["--preset", "3.2c"], "--preset 3.2C differs from the checkpoint's 1"),
+                         (["--preset", "9"], "--preset: unknown preset '9' for Breakout"),
+                         (["--game", "Gopher", "--preset", "3.2A"],
+                          "--game Gopher differs from the checkpoint's Breakout")):
+        assert main(["eval", "--checkpoint", str(full / "checkpoint.pkl"), *flags, "--out",
+                     str(tmp_path), "--quiet"]) == 2
+        assert error in capsys.readouterr().err
     assert main(["eval", "--checkpoint", str(full / "checkpoint.pkl"), "--seed", "5",
                  "--out", str(tmp_path), "--quiet"]) == 2
     assert "--seed 5 differs from the checkpoint's 0 (to evaluate on other seeds, give " \

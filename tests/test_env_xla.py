@@ -176,6 +176,9 @@ def test_numpy_int64_actions_out_of_range_are_refused_with_x64_off():
             step(handle, [1, 2, 3])
         handle, (*_, info) = step(handle, np.array([3, 1]))
         np.testing.assert_array_equal(np.asarray(info["executed_action"])[:, -1], [3, 1])
+        for actions in ([2, 0], (np.int64(1), np.int64(2))):  # as env.step takes them
+            handle, (*_, info) = step(handle, actions)
+            np.testing.assert_array_equal(np.asarray(info["executed_action"])[:, -1], actions)
 
 
 def test_64_bit_actions_out_of_range_are_refused_not_wrapped():

@@ -124,6 +124,11 @@ def test_kwargs_that_would_contradict_the_id_are_refused(kwargs, pattern):
         gym.make_vec("stori_jax/Breakout-2.1-v0", num_envs=2, game="Boxing")
 
 
+def test_the_ids_own_game_and_preset_in_another_case_are_not_a_contradiction():
+    env = gym.make("stori_jax/Breakout-3.2A-v0", game="breakout", preset="3.2a", obs="raw")
+    env.close()
+
+
 @pytest.mark.parametrize("vector", [False, True])
 def test_a_refused_seed_leaves_the_env_usable(vector):
     """With random no-ops at every reset (noop_max) the seed shows in the RAM: after a refused
