@@ -397,6 +397,7 @@ def _plot_presets(plt, results, stem: Path, batch: int):
 
 def _check_arguments(parser, args):
     import stori_jax
+    from stori_jax.presets import spelt_as_the_paper
 
     if not args.seconds > 0:
         parser.error(f"--seconds must be > 0, got {args.seconds}")
@@ -404,12 +405,11 @@ def _check_arguments(parser, args):
     if args.games is not None:
         args.games = stori_games(parser, "--games", args.games)
     names = sorted({p for _, p in stori_jax.list_presets()})
-    spelt = {name.lower(): name for name in names}  # preset names match whatever their case
     for preset in args.presets or ():
-        if preset.lower() not in spelt:
+        if spelt_as_the_paper(preset) not in names:
             parser.error(f"--presets: {preset!r} is not one of {names}")
     if args.presets is not None:
-        args.presets = [spelt[preset.lower()] for preset in args.presets]
+        args.presets = [spelt_as_the_paper(preset) for preset in args.presets]
 
 
 def main(argv=None):

@@ -23,9 +23,8 @@ the ``subproc`` backend shows the episode's last frame.
 Episode ends: ``max_episode_frames`` becomes envpool's step cap (frames / frame skip, rounded up),
 which does not count the reset's no-op frames as ALE's frame cap on ``subproc`` does (with
 ``noop_max`` > 0 a truncation can come up to about noop_max / frame_skip + 1 steps later here);
-and where the game ends on the step
-that reaches the cap, envpool reports ``terminated`` False (``truncated`` only), while
-``subproc`` reports both.
+and where the game ends on the step that reaches the cap, envpool reports ``terminated`` False
+(``truncated`` only), while ``subproc`` reports both.
 
 No-op starts: envpool plays at least one NOOP frame at every reset (its ``noop_max=N`` draws
 1..N frames), so this backend passes ``noop_max + 1`` and an episode starts after 1..noop_max+1

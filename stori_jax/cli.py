@@ -101,18 +101,18 @@ def _check_writable(flag: str, path: Path, directory: Path) -> None:
 def _selected_presets(games, presets):
     from stori_jax import list_presets
     from stori_jax.presets import preset as check_preset
+    from stori_jax.presets import spelt_as_the_paper
 
     for g in games or []:
         check_preset(g, "3.1")  # unknown game -> ValueError naming the allowed ones
     in_games = [(g, n) for g, n in list_presets()
                 if not games or g.lower() in {x.lower() for x in games}]
     allowed = list(dict.fromkeys(n for _, n in in_games))
-    spelt = {n.lower(): n for n in allowed}  # preset names match whatever their case
-    unknown = [n for n in presets or [] if n.lower() not in spelt]
+    unknown = [n for n in presets or [] if spelt_as_the_paper(n) not in allowed]
     if unknown:
         raise ValueError(f"--presets: unknown {unknown}; allowed"
                          f"{' for ' + ' '.join(games) if games else ''}: {allowed}")
-    presets = presets and [spelt[n.lower()] for n in presets]
+    presets = presets and [spelt_as_the_paper(n) for n in presets]
     chosen = [(g, n) for g, n in in_games if not presets or n in presets]
     if not chosen:
         raise ValueError(f"no paper preset matches --games {games} --presets {presets}")

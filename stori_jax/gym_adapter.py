@@ -110,8 +110,7 @@ class _Owner:
             from stori_jax.checks import MAX_SEED, check_int
 
             check_int("seed", seed, 0, MAX_SEED)  # a refused seed leaves the env as it was
-        if reseed:  # asked for, so kept even if this reset fails (a worker died in it)
-            self._seed = seed
+            self._seed = seed  # asked for, so kept even if this reset fails (a worker dies)
         if self._env.closed:  # a worker died (the step said so): start again from the seed
             self._env, reseed = self._make(self._seed), False
         self._fresh = False

@@ -69,6 +69,12 @@ def _canonical_game(game: str) -> str:
                      "takes no preset, which plays it as 3.1, or a Config)")
 
 
+def spelt_as_the_paper(name: str) -> str:
+    """A preset name spelt as the paper does ('3.2a' -> '3.2A'); unchanged if no game has it."""
+    spellings = {n.lower(): n for _, n in _PRESETS}
+    return spellings.get(name.lower(), name) if isinstance(name, str) else name
+
+
 def canonical_preset(game: str, name: str) -> str:
     """Preset ``name`` of ``game`` spelt as the paper does ("3.2a" -> "3.2A"), as game names
     are matched whatever their case; an unknown one is a ValueError naming the allowed ones."""
@@ -77,10 +83,9 @@ def canonical_preset(game: str, name: str) -> str:
     if not isinstance(name, str):
         raise ValueError(f"preset must be a name (a string) of {game}: allowed {names}, got "
                          f"{name!r} ({type(name).__name__})")
-    for n in names:
-        if n.lower() == name.lower():
-            return n
-    raise ValueError(f"unknown preset {name!r} for {game}: allowed {names}")
+    if spelt_as_the_paper(name) not in names:
+        raise ValueError(f"unknown preset {name!r} for {game}: allowed {names}")
+    return spelt_as_the_paper(name)
 
 
 def preset(game: str, name: str) -> Config:

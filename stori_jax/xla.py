@@ -72,11 +72,9 @@ def check_traced_actions(actions, num_envs: int, num_actions: int) -> jax.Array:
         raise ValueError(f"actions must have an integer dtype ({expected}), got {dtype}")
     # wider values saturate (a plain cast would wrap a 64-bit 2**32 + 1 to 1): out of range
     # stays out of range, and the host refuses it as env.step does
-    bounds = jnp.iinfo(jnp.int32)
-    if jnp.issubdtype(dtype, jnp.unsignedinteger) and jnp.iinfo(dtype).max > bounds.max:
-        actions = jnp.minimum(actions, bounds.max)
-    elif jnp.iinfo(dtype).max > bounds.max:
-        actions = jnp.clip(actions, bounds.min, bounds.max)
+    bounds, wide = jnp.iinfo(jnp.int32), jnp.iinfo(dtype)
+    if wide.max > bounds.max:
+        actions = jnp.clip(actions, max(bounds.min, wide.min), bounds.max)
     return jnp.asarray(actions, jnp.int32)
 
 
