@@ -259,6 +259,26 @@ def test_boxing_displace_moves_boxers_to_each_others_start_corner():
         assert np.abs(ram[[33, 35]] - player0).max() <= 3, (k, ram[[33, 35]], player0)
 
 
+def test_the_episode_start_ram_is_read_before_the_no_ops():
+    """Spec 9: the episode-start RAM is the RAM right after the reset.  With no-ops after the
+    reset (noop_max 30) Boxing's enemy walks away from its start corner first; displacing
+    (mode 3) still sends the player to the enemy's start corner, as without no-ops (it went to
+    where the no-ops had left the enemy)."""
+    plain = make("Boxing", num_envs=1, frame_skip=1)
+    ev = make("Boxing", event(3, 1.0), num_envs=1, frame_skip=1, noop_max=30, seed=3)
+    try:
+        start = np.asarray(plain.reset()[1]["ram"][0]).astype(int)
+        after_noops = np.asarray(ev.reset()[1]["ram"][0]).astype(int)
+        enemy0 = start[[33, 35]]
+        assert np.abs(after_noops[[33, 35]] - enemy0).max() > 10, "the no-ops should move it"
+        for _ in range(3):
+            ram = np.asarray(ev.step(np.array([NOOP]))[4]["ram"][0]).astype(int)
+    finally:
+        plain.close()
+        ev.close()
+    np.testing.assert_array_equal(ram[[32, 34]], enemy0)
+
+
 # ---------------------------------------------------------------------------------------------
 # Gopher (section 7)
 # ---------------------------------------------------------------------------------------------

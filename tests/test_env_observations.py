@@ -237,6 +237,42 @@ def test_ram_obs_mode_renders_the_first_observation_after_an_autoreset():
     assert (run.obs[8] != run.reset_obs).any()
 
 
+@pytest.mark.parametrize("end", ["truncated", "game over"])
+def test_ram_obs_mode_leaves_an_episodes_final_frame_true_and_says_so(end):
+    """autoreset=False: ALE emulates no frame past an episode's end, so a RAM mode cannot
+    render the frame that ends an episode; that observation is the true screen, and
+    obs_masked is False there (it said True).  Breakout, ball hidden (mode 2) at p = 1, FIRE
+    (the ball is served; the paddle never moves): truncated at frame 42, in the middle of the
+    11th step (its observation is that one frame), or a game over (five balls lost).  Every
+    observation before the last one is rendered (obs_masked; most differ from the twin's)."""
+    config = Config(observation=ObservationMask("ram", 2, 1.0))
+    kw = dict(obs="raw", num_envs=1, num_workers=0, autoreset=False)
+    if end == "truncated":
+        kw["max_episode_frames"] = 42
+    fire = np.ones(1, np.int32)
+    env, twin = make("Breakout", config, **kw), make("Breakout", **kw)
+    try:
+        env.reset(), twin.reset()
+        differed = []
+        for k in range(2000):
+            obs, _, terminated, truncated, info = env.step(fire)
+            twin_obs, *_ = twin.step(fire)
+            if terminated[0] or truncated[0]:
+                break
+            assert info["obs_masked"][0], k
+            differed.append((np.asarray(obs) != np.asarray(twin_obs)).any())
+    finally:
+        env.close()
+        twin.close()
+    if end == "truncated":
+        assert truncated[0] and k == 10
+    else:
+        assert terminated[0] and not truncated[0]
+    assert np.mean(differed) > 0.5
+    assert not info["obs_masked"][0]
+    np.testing.assert_array_equal(np.asarray(obs), np.asarray(twin_obs))
+
+
 def test_boxing_hide_enemy_removes_the_black_boxer():
     """RAM mode 2 (Boxing 3.2C): the enemy (black, RAM 2) is drawn in the ring colour: no black
     pixel is left inside the ring, while the twin shows the black boxer there."""

@@ -93,12 +93,15 @@ class Emulator:
     def reset(self) -> None:
         ale, v, i = self.ale, self.v, self.i
         ale.reset_game()
+        # the episode-start RAM is read right after the reset, before the no-ops (which move
+        # the game on: Boxing's enemy walks away from its start corner)
+        ale.getRAM(self.start_ram)
         for _ in range(int(v["noops"][i])):
             ale.act(self.noop)
             if ale.game_over():
                 ale.reset_game()
-        ale.getRAM(self.start_ram)
-        self.prev_ram[:] = self.start_ram
+                ale.getRAM(self.start_ram)
+        ale.getRAM(self.prev_ram)
         self.rule_state = self.rule.new_state() if self.rule is not None else None
         self.carry = 0.0
         self.episode_return = 0.0
@@ -154,8 +157,12 @@ class Emulator:
             np.maximum(self.frames[0], self.frames[1], out=self.frames[0])
 
     def render_ram_obs(self, slot: int) -> bool:
-        """Screen ``slot`` <- the next frame under NOOP of a RAM-modified copy of the game."""
+        """Screen ``slot`` <- the next frame under NOOP of a RAM-modified copy of the game.
+        False where nothing was rendered: the mode's condition does not hold, or the episode
+        has ended (ALE emulates no frame past an episode's end, so the screen stays true)."""
         ale = self.ale
+        if ale.game_over():  # a game over or the frame cap
+            return False
         ale.getRAM(self.ram)
         writes = self.ram_obs.writes(self.ram)
         if writes is None:
