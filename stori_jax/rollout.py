@@ -34,12 +34,15 @@ def _is_prng_key(key) -> bool:
 
 
 def rollout(env, policy_fn: Callable[[Any, jax.Array, jax.Array], jax.Array], params,
-            key: jax.Array, num_steps: int, *, obs: jax.Array | None = None) -> Trajectory:
+            key: jax.Array, num_steps: int, *, obs: jax.Array | None = None,
+            seed: int | None = None) -> Trajectory:
     """Run ``num_steps`` agent steps of ``env`` under ``policy_fn(params, obs, key) -> (B,)``.
 
-    Starts from ``obs`` when given (continuing a run), else resets the env.  The policy is jitted
-    here; its randomness comes from ``key`` (split once per step), so the same key, params and
-    env seed give the same trajectory.  Give the agent a key of its own, such as
+    Starts from ``obs`` when given (continuing a run), else resets the env: ``reset(seed=seed)``
+    with a ``seed`` (the run of ``make(..., seed=seed)``, however the env was used before), a
+    plain ``reset()`` without (the env's streams go on: a second rollout plays other episodes).
+    The policy is jitted here; its randomness comes from ``key`` (split once per step), so the
+    same key, params and seed give the same trajectory.  Give the agent a key of its own, such as
     ``stori_jax.agent_key(seed)``: an env of ``seed`` draws from the chain of
     ``jax.random.PRNGKey(seed)``, split as here, so that key would sample the policy's actions
     with the env's own step keys.
@@ -55,9 +58,12 @@ def rollout(env, policy_fn: Callable[[Any, jax.Array, jax.Array], jax.Array], pa
                  if isinstance(key, jax.Array) else repr(key))
         raise ValueError(f"key must be a JAX PRNG key (jax.random.key(seed) or "
                          f"jax.random.PRNGKey(seed)), got {shown}")
+    if obs is not None and seed is not None:
+        raise ValueError("rollout takes obs (go on from the env's current observation) or seed "
+                         "(reset the env with that seed first), not both")
     policy = jax.jit(policy_fn)
     if obs is None:
-        obs, _ = env.reset()
+        obs, _ = env.reset(seed=seed)
     else:
         space = env.observation_space
         if tuple(jnp.shape(obs)) != space.shape or jnp.result_type(obs) != space.dtype:

@@ -600,3 +600,9 @@ def test_type0_boxing_labels_follow_the_scores():
     returns = run.stacked("reward").sum(0)
     np.testing.assert_array_equal(labels["player_score"] - labels["enemy_score"], returns)
     assert (labels["enemy_score"] > 0).any()
+    # the clock counts down from 2:00 one second per 60 frames (15 steps): 1:59 after the
+    # first step, 1:50 after 150 (the raw minutes byte is 0x1B then)
+    clock = np.stack([60 * i["labels"]["clock_minutes"] + i["labels"]["clock_seconds"]
+                      for i in run.info]).astype(int)
+    assert clock[0].tolist() == [119, 119] and clock[-1].tolist() == [110, 110]
+    assert set(np.diff(clock, axis=0).ravel().tolist()) == {0, -1}

@@ -380,7 +380,7 @@ def test_boxing_displace_to_corners():
 
 
 def test_boxing_labels():
-    ram = make_ram({32: 1, 34: 2, 33: 3, 35: 4, 18: 0x42, 19: 0x17, 16: 1, 17: 0x59,
+    ram = make_ram({32: 1, 34: 2, 33: 3, 35: 4, 18: 0x42, 19: 0x17, 16: 0x1B, 17: 0x59,
                     1: 14, 2: 0, 3: 214, 4: 208})
     L = boxing.LABELS
     got = {k: int(f(ram.astype(np.int32))) for k, f in L.items()}

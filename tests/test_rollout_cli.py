@@ -53,6 +53,25 @@ def test_a_rollout_continued_from_its_last_key_and_obs_is_one_long_rollout():
     np.testing.assert_array_equal(whole.last_key, rest.last_key)
 
 
+def test_a_rollout_with_a_seed_replays_that_seeds_run_on_a_used_env():
+    """rollout(..., seed=s) resets the env with seed s first: the same trajectory each time,
+    the one a new env of seed s gives.  Without it the env's streams go on (a plain reset), so
+    a second rollout of one env plays other episodes."""
+    params, key = {"num_actions": 4}, stori_jax.agent_key(3)
+    with stori_jax.make("Breakout", "1", num_envs=2, seed=3, obs="ram") as env:
+        fresh = stori_jax.rollout(env, random_policy, params, key, 6)
+    with stori_jax.make("Breakout", "1", num_envs=2, seed=9, obs="ram") as env:
+        seeded = [stori_jax.rollout(env, random_policy, params, key, 6, seed=3) for _ in range(2)]
+        plain = stori_jax.rollout(env, random_policy, params, key, 6)
+        with pytest.raises(ValueError, match="rollout takes obs .* or seed .*, not both"):
+            stori_jax.rollout(env, random_policy, params, key, 1, obs=plain.last_obs, seed=3)
+    for traj in seeded:
+        for a, b in zip(jax.tree.leaves(fresh), jax.tree.leaves(traj)):
+            np.testing.assert_array_equal(a, b)
+    assert (np.asarray(plain.info["executed_action"]) != np.asarray(
+        fresh.info["executed_action"])).any()
+
+
 def _key_bytes(keys) -> set:
     return {bytes(np.asarray(k, np.uint32)) for k in keys}
 

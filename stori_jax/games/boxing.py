@@ -7,7 +7,7 @@ from stori_jax.games.base import (EventOutcome, EventRule, GameSpec, NO_EVENT, R
 
 PLAYER_X, ENEMY_X, PLAYER_Y, ENEMY_Y = 32, 33, 34, 35
 PLAYER_SCORE, ENEMY_SCORE = 18, 19  # BCD (ALE reads them as decimal scores)
-CLOCK_MINUTES, CLOCK_SECONDS = 16, 17  # seconds in BCD
+CLOCK_MINUTES, CLOCK_SECONDS = 16, 17  # minutes in the high nibble (the low one is 0xB), seconds in BCD
 PLAYER_COLOUR, ENEMY_COLOUR, RING_COLOUR, CLOCK_COLOUR = 1, 2, 3, 4
 INVISIBLE = 214  # colour value that makes a sprite the ring background colour
 SCORES = (PLAYER_SCORE, ENEMY_SCORE)
@@ -87,7 +87,7 @@ LABELS = {
     "enemy_y": lambda ram: ram[..., ENEMY_Y],
     "player_score": lambda ram: bcd(ram[..., PLAYER_SCORE]),
     "enemy_score": lambda ram: bcd(ram[..., ENEMY_SCORE]),
-    "clock_minutes": lambda ram: ram[..., CLOCK_MINUTES],
+    "clock_minutes": lambda ram: ram[..., CLOCK_MINUTES] >> 4,
     "clock_seconds": lambda ram: bcd(ram[..., CLOCK_SECONDS]),
     **byte_labels(["player_colour", "enemy_colour", "ring_colour", "clock_colour"],
                   (PLAYER_COLOUR, ENEMY_COLOUR, RING_COLOUR, CLOCK_COLOUR)),
