@@ -139,6 +139,9 @@ def aggregate(evaluations: list[dict], ppo_policy: str = "sampled") -> list[dict
             row[column] = dict(
                 seeds=sorted(seeds), per_seed=means,
                 episodes=[seeds[s]["episodes"] for s in sorted(seeds)],
+                # None where an older evaluation did not record it
+                max_episode_frames=[seeds[s].get("max_episode_frames") for s in sorted(seeds)],
+                truncated=[seeds[s].get("truncated") for s in sorted(seeds)],
                 mean=float(np.mean(means)) if means else None,
                 std=float(np.std(means, ddof=1)) if len(means) > 1 else None)
         paper = PAPER_RESULTS.get((game, preset))
@@ -253,6 +256,29 @@ def _hyperparameters(config: dict) -> dict:
     return {k: v for k, v in config.items() if k not in ("seed", "checkpoint_every")}
 
 
+def evaluation_notes(rows: list[dict]) -> list[str]:
+    """Evaluations in the table that a reader should know about: episodes cut off at the frame
+    cap (their returns stop there), and a row that compares evaluations under different caps."""
+    notes = []
+    for r in rows:
+        caps = set()
+        for column in ("PPO", "Random"):
+            cell = r[column]
+            for seed, episodes, cap, cut in zip(cell["seeds"], cell["episodes"],
+                                                cell["max_episode_frames"], cell["truncated"]):
+                caps.add(cap)
+                if cut:
+                    notes.append(f"{r['game']} {r['preset']} {column} seed {seed}: {cut} of "
+                                 f"{episodes} episodes cut off at max_episode_frames {cap} (their "
+                                 "returns stop there)")
+        if len(caps) > 1:
+            shown = ", ".join("not recorded" if c is None else str(c)
+                              for c in sorted(caps, key=lambda c: (c is None, c)))
+            notes.append(f"{r['game']} {r['preset']}: the evaluations ran under different frame "
+                         f"caps (max_episode_frames {shown})")
+    return notes
+
+
 def table_notes(curves: dict, evaluations: list[dict], ppo_policy: str) -> list[str]:
     """What a reader of the table and the curves should know: training runs the table leaves
     out (no evaluation of ``ppo_policy``), and runs pooled in one panel with different
@@ -329,12 +355,13 @@ def build_table(results_dir: Path, out_dir: Path | None = None,
     evaluations = load_evaluations(results_dir)
     curves = learning_curves(results_dir)  # read (and checked) before anything is written
     rows = aggregate(evaluations, ppo_policy)
-    for note in table_notes(curves, evaluations, ppo_policy):
+    notes = table_notes(curves, evaluations, ppo_policy) + evaluation_notes(rows)
+    for note in notes:
         print(f"stori-jax table: note: {note}", file=sys.stderr)
-    text = markdown(rows)
+    text = markdown(rows) + "".join(f"\n- {note}" for note in notes) + ("\n" if notes else "")
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "table.md").write_text(text)
-    (out_dir / "table.json").write_text(json.dumps(dict(ppo_policy=ppo_policy, rows=rows),
-                                                   indent=1))
+    (out_dir / "table.json").write_text(json.dumps(dict(ppo_policy=ppo_policy, rows=rows,
+                                                        notes=notes), indent=1))
     return text, [out_dir / "table.md", out_dir / "table.json",
                   *plot_curves(curves, evaluations, out_dir)]

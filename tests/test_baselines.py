@@ -325,6 +325,29 @@ def fake_eval(root, game, preset, agent, seed, mean, policy=None):
                  f"{agent}-seed{seed}")
 
 
+def test_the_table_notes_evaluations_cut_off_at_the_frame_cap(tmp_path, capsys):
+    """An evaluation whose episodes were cut off at max_episode_frames, pooled with one under
+    the usual cap, made a row of the table without a word (in table.md, table.json or on
+    stderr)."""
+    for seed, cap, cut in ((0, 108_000, 0), (7, 400, 4)):
+        write_result(dict(game="Breakout", preset="3.1", agent="ppo", policy="sampled",
+                          train_seed=seed, mean_return=1.0, episodes=4, max_episode_frames=cap,
+                          truncated=cut), tmp_path / f"ppo-seed{seed}")
+    fake_eval(tmp_path, "Breakout", "3.1", "random", 0, 1.0)  # recorded before caps were
+    text, _ = build_table(tmp_path, tmp_path / "out")
+    notes = ["Breakout 3.1 PPO seed 7: 4 of 4 episodes cut off at max_episode_frames 400 "
+             "(their returns stop there)",
+             "Breakout 3.1: the evaluations ran under different frame caps (max_episode_frames "
+             "400, 108000, not recorded)"]
+    err = capsys.readouterr().err
+    table = json.loads((tmp_path / "out" / "table.json").read_text())
+    assert table["notes"] == notes
+    assert table["rows"][0]["PPO"]["truncated"] == [0, 4]
+    for note in notes:
+        assert f"- {note}" in text and f"note: {note}" in err
+    assert (tmp_path / "out" / "table.md").read_text() == text
+
+
 def test_the_table_joins_a_preset_spelt_in_lower_case_to_its_row(tmp_path):
     for seed, preset in ((0, "3.2C"), (7, "3.2c")):
         fake_eval(tmp_path, "Breakout", preset, "ppo", seed, 2.0 * seed)
