@@ -56,6 +56,7 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
     """Play ``episodes`` episodes; returns a dict with every return and their mean and std."""
     import jax
     import stori_jax
+    from stori_jax.provenance import software
     from tqdm import tqdm
 
     if policy not in POLICIES:
@@ -119,7 +120,8 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
                 mean_return=float(np.mean(flat)), std_return=float(np.std(flat)),
                 returns=flat, lengths=[n for env_lengths in lengths for n in env_lengths],
                 truncated=cut_off,
-                agent_steps=agent_steps, seconds=time.perf_counter() - start)
+                agent_steps=agent_steps, seconds=time.perf_counter() - start,
+                software=software())
 
 
 def write_result(result: dict, out_dir: Path) -> Path:

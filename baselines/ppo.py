@@ -31,6 +31,7 @@ from baselines.evaluate import CHECKPOINT_POLICIES, stori_game
 from stori_jax.checks import check_int, check_real
 from stori_jax.core import agent_key
 from stori_jax.presets import canonical_preset
+from stori_jax.provenance import software
 
 NETWORKS = ("nature", "nips", "tiny")
 ACTION_HEADS = ("joint", "factored")
@@ -597,7 +598,7 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
     summary = dict(config=dataclasses.asdict(config), iterations_done=last,
                    finished=last == config.num_iterations,
                    agent_steps=last * config.batch_size, train_seconds=elapsed,
-                   train_sps=last * config.batch_size / max(elapsed, 1e-9))
+                   train_sps=last * config.batch_size / max(elapsed, 1e-9), software=software())
     if summary["finished"]:
         (out / "summary.json").write_text(json.dumps(summary, indent=1))
     return dict(summary, iterations_now=last - start)  # 0: a resumed run had finished

@@ -112,8 +112,10 @@ def main(argv=None):
     require_at_least_one(parser, sizes=args.sizes)
     device = str(jax.devices()[0])
     results = measure(args.sizes)
+    from stori_jax.provenance import software
+
     meta = dict(date=datetime.date.today().isoformat(), host=socket.gethostname(),
-                device=device, jax=jax.__version__)
+                device=device, jax=jax.__version__, software=software())
     lines = [f"# JAX-side cost per step (ms), {meta['date']} on {meta['host']} ({device})", "",
              "| stage | " + " | ".join(f"B = {b}" for b in args.sizes) + " |",
              "|---|" + "---|" * len(args.sizes)]

@@ -21,6 +21,7 @@ import numpy as np
 
 import stori_jax
 from baselines import ppo
+from stori_jax.provenance import software
 from baselines.run_evidence import EVIDENCE_HYPERPARAMETERS, GAME_HYPERPARAMETERS
 from _checks import require_at_least_one, stori_game_and_preset  # this folder is on sys.path
 
@@ -151,7 +152,7 @@ def main(argv=None) -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / f"{stem}.json").write_text(json.dumps(dict(
         config={**vars(args), "out": str(args.out)},
-        machine=platform.processor() or platform.machine(),
+        machine=platform.processor() or platform.machine(), software=software(),
         results=results), indent=1))
     (args.out / f"{stem}.md").write_text(text)
     plot(stage_rates(results), args.out / f"{stem}.png", title=text.splitlines()[0])

@@ -431,9 +431,11 @@ def main(argv=None):
     _check_arguments(parser, args)
     if args.sizes is None:
         args.sizes = [8, 32] if args.quick else [8, 16, 32, 64]
+    from stori_jax.provenance import software
+
     meta = dict(date=datetime.date.today().isoformat(), host=socket.gethostname(),
                 cores=cores(), workers=args.workers, python=platform.python_version(),
-                seconds=args.seconds, argv=sys.argv[1:])
+                seconds=args.seconds, argv=sys.argv[1:], software=software())
     results = add_ratios(run(args))
     args.out.mkdir(parents=True, exist_ok=True)
     subset = "".join(f"-{'-'.join(names)}" for names in (args.games, args.presets) if names)

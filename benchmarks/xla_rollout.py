@@ -22,6 +22,7 @@ from tqdm import tqdm
 
 import stori_jax
 from baselines import ppo
+from stori_jax.provenance import software
 from _checks import require_at_least_one, stori_game_and_preset  # this folder is on sys.path
 from ppo_rollout import median_rate, plot
 
@@ -101,7 +102,8 @@ def main(argv=None) -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     path["json"].write_text(json.dumps(dict(
         config={**vars(args), "out": str(args.out)},
-        machine=platform.processor() or platform.machine(), results=rows), indent=1))
+        machine=platform.processor() or platform.machine(), software=software(),
+        results=rows), indent=1))
     path["md"].write_text(text)
     bars = [(f"B={r['num_envs']}, {name}", r[key]) for r in rows
             for name, key in (("Python loop", "python_loop"), ("lax.scan over xla", "compiled_scan"))]

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from stori_jax.provenance import software
+
 
 def random_policy(num_actions: int):
     """policy(obs, key) -> (B,) uniformly random actions."""
@@ -161,7 +163,7 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
             contact_sheet(game, name, stori_jax.preset(game, name), written[-1], seed=seed)
     (out / "results.json").write_text(json.dumps(dict(
         agent=agent or "random", seed=seed, episodes=episodes, num_envs=num_envs,
-        max_steps=max_steps, rows=rows),
+        max_steps=max_steps, software=software(), rows=rows),
         indent=1))
     text = f"Agent: {agent or 'uniformly random policy'}\n\n" + table(rows)
     if gallery:

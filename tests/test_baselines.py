@@ -8,6 +8,7 @@ import dataclasses
 import json
 import pickle
 
+import ale_py
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -210,6 +211,8 @@ def test_training_writes_its_files(uninterrupted):
     assert summary["finished"] and summary["agent_steps"] == 3 * 64
     assert {p.name for p in out.iterdir()} >= {"config.json", "log.csv", "episodes.csv",
                                               "checkpoint.pkl", "summary.json"}
+    recorded = json.loads((out / "summary.json").read_text())["software"]
+    assert recorded["packages"]["jax"] == jax.__version__ and "commit" in recorded
     log = read_log(out)
     assert [int(r["global_step"]) for r in log] == [64, 128, 192]
     assert json.loads((out / "config.json").read_text())["network"] == "tiny"
@@ -563,6 +566,7 @@ def test_eval_counts_and_reports_episodes_cut_off_at_the_frame_cap(tmp_path, cap
                  "--quiet"]) == 0
     result = json.loads((tmp_path / "eval-random.json").read_text())
     assert result["truncated"] == 2 and result["lengths"] == [10, 10]
+    assert result["software"]["packages"]["ale-py"] == ale_py.__version__
     assert "note: 2 of 2 episodes were cut off at 40 frames (truncated; --max-episode-frames " \
         "lowers the cap)" in capsys.readouterr().out
     assert main(["eval", "--random", "--game", "Breakout", "--preset", "3.1",

@@ -13,8 +13,10 @@ def test_suite_writes_table_json_and_gallery(tmp_path, capsys):
     out = tmp_path / "suite"
     assert main(["suite", "--games", "Breakout", "--presets", "1", "3.2A", "--episodes", "1",
                  "--num-envs", "2", "--max-steps", "60", "--out", str(out), "--quiet"]) == 0
-    rows = json.loads((out / "results.json").read_text())["rows"]
+    results = json.loads((out / "results.json").read_text())
+    rows = results["rows"]
     assert [(r["game"], r["preset"]) for r in rows] == [("Breakout", "1"), ("Breakout", "3.2A")]
+    assert results["software"]["packages"]["stori-jax"]
     noisy, masked = rows
     assert 0.2 < noisy["corrupted_fraction"] < 0.4  # p = 0.3 per frame
     assert noisy["masked_fraction"] == 0 and masked["masked_fraction"] == 1.0  # blackout p = 1

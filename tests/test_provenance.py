@@ -1,0 +1,61 @@
+"""software(): what made a result, recorded in every result file the commands write."""
+
+import shutil
+import subprocess
+
+import jax
+import pytest
+
+from stori_jax import provenance
+
+
+def test_software_names_the_packages_and_the_code():
+    found = provenance.software()
+    assert found["packages"]["jax"] == jax.__version__
+    assert set(found["packages"]) == set(provenance.PACKAGES)
+    assert found["python"].count(".") == 2 and found["machine"]
+    commit = found["commit"]
+    assert commit is None or (len(commit.removesuffix("+dirty")) == 40
+                              and int(commit.removesuffix("+dirty"), 16) >= 0)
+
+
+@pytest.fixture
+def checkout(tmp_path, monkeypatch):
+    """A git checkout holding a stori_jax folder, standing in for this package's."""
+    package = tmp_path / "repo" / "stori_jax"
+    package.mkdir(parents=True)
+    (package / "core.py").write_text("x = 1\n")
+    monkeypatch.setattr(provenance, "PACKAGE_DIR", package.resolve())
+    if shutil.which("git") is None:
+        return None
+    git = ["git", "-C", str(package.parent), "-c", "user.name=t", "-c", "user.email=t@t"]
+    subprocess.run(git + ["init", "-q"], check=True)
+    subprocess.run(git + ["add", "."], check=True)
+    subprocess.run(git + ["commit", "-q", "-m", "c"], check=True)
+    head = subprocess.run(git + ["rev-parse", "HEAD"], check=True, capture_output=True,
+                          text=True).stdout.strip()
+    return package, head
+
+
+def test_the_commit_is_the_checkouts_and_says_when_tracked_files_changed(checkout):
+    if checkout is None:  # no git on this machine: no commit to record
+        assert provenance.code_commit() is None
+        return
+    package, head = checkout
+    assert provenance.code_commit() == head
+    (package / "notes.txt").write_text("untracked files do not count\n")
+    assert provenance.code_commit() == head
+    (package / "core.py").write_text("x = 2\n")
+    assert provenance.code_commit() == head + "+dirty"
+
+
+def test_a_package_outside_its_own_checkout_has_no_commit(tmp_path, monkeypatch):
+    """A wheel installed in a virtual environment that lies inside some other git checkout:
+    that checkout's commit is not the code's."""
+    other = tmp_path / "other"
+    package = other / ".venv" / "site-packages" / "stori_jax"
+    package.mkdir(parents=True)
+    monkeypatch.setattr(provenance, "PACKAGE_DIR", package.resolve())
+    if shutil.which("git") is not None:
+        subprocess.run(["git", "-C", str(other), "init", "-q"], check=True)
+    assert provenance.code_commit() is None
