@@ -88,6 +88,14 @@ def check_probability(name: str, value: Any) -> float:
     return check_real(name, value, 0, 1)
 
 
+def unless_traced(check, name: str, value: Any, *bounds):
+    """``check(name, value, *bounds)``, or ``value`` as it is inside a JAX transformation (a
+    traced value has no number to check yet): for the arguments of the pure functions."""
+    import jax
+
+    return value if isinstance(value, jax.core.Tracer) else check(name, value, *bounds)
+
+
 def check_actions(actions, num_envs: int, num_actions: int):
     """A batch of actions checked on the host: shape (num_envs,), an integer dtype, values in
     [0, num_actions); returned as int32 numpy."""

@@ -288,6 +288,32 @@ def test_unknown_schedule():
         concept2_probability(jnp.zeros(3, jnp.int32), "linear", 10)
 
 
+def test_the_pure_functions_refuse_bad_parameters_and_take_traced_ones():
+    """corrupt_actions(prob=1.5) corrupted every action and concept_of(..., 'cyclic', 0) gave
+    concepts without a word; inside jit or vmap a parameter has no number yet and is taken as
+    it is (a sweep over probabilities)."""
+    from stori_jax.functional import draw_mask_decisions
+
+    keys, zeros = keys_of(0)[:4], jnp.zeros(4, jnp.int32)
+    for call, match in (
+            (lambda: corrupt_actions(keys, zeros, zeros, prob=1.5, num_slots=1,
+                                     replacement=[0, 1]), r"prob must be in \[0, 1\], got 1.5"),
+            (lambda: corrupt_actions(keys, zeros, zeros, prob=0.5, num_slots=0, sticky=True),
+             "num_slots must be >= 1, got 0"),
+            (lambda: draw_mask_decisions(keys, prob=-0.1, per_frame=True, torch=False),
+             r"prob must be in \[0, 1\], got -0.1"),
+            (lambda: concept_of(keys, jnp.arange(4), "cyclic", 0),
+             r"period must be in \[1, 2147483647\], got 0")):
+        with pytest.raises(ValueError, match=match):
+            call()
+    probs = jnp.array([0.0, 1.0])
+    masked = jax.vmap(lambda p: draw_mask_decisions(keys, prob=p, per_frame=True,
+                                                    torch=False)[0].sum())(probs)
+    assert masked.tolist() == [0, 8]
+    assert jax.jit(lambda t: concept_of(keys, jnp.arange(4), "cyclic", t))(2).tolist() == [
+        0, 0, 1, 1]
+
+
 # ---------------------------------------------------------------------------------------------
 # Keys and event uniforms
 # ---------------------------------------------------------------------------------------------

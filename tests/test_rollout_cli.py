@@ -1,6 +1,7 @@
 """rollout() stacking and determinism; the command line's list/run and its errors."""
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -113,6 +114,19 @@ def test_the_agent_key_stream_shares_no_key_with_the_envs():
     agent_keys = _key_bytes(key for key, _ in seen)
     assert len(agent_keys) == steps
     assert not agent_keys & (env_side | _key_bytes(state for _, state in seen))
+
+
+def test_agent_key_takes_the_seeds_an_env_takes():
+    """agent_key(2**32) was agent_key(0) (JAX keys are 32-bit) and agent_key(1.0) failed deep
+    inside JAX; make refuses those seeds, and so does agent_key now."""
+    assert (np.asarray(stori_jax.agent_key(np.int64(5)))
+            == np.asarray(stori_jax.agent_key(5))).all()
+    for bad, shown in ((2**32, "in [0, 2147483647], got 4294967296"),
+                       (-1, "in [0, 2147483647], got -1"),
+                       (1.0, "an int in [0, 2147483647], got 1.0"),
+                       (True, "an int in [0, 2147483647], got True")):
+        with pytest.raises(ValueError, match=re.escape(f"seed must be {shown}")):
+            stori_jax.agent_key(bad)
 
 
 def test_rollout_rejects_bad_arguments():

@@ -7,6 +7,8 @@ from typing import Sequence
 import jax
 import jax.numpy as jnp
 
+from stori_jax.checks import check_int, check_probability, unless_traced
+
 
 def corrupt_actions(keys: jax.Array, actions: jax.Array, prev_executed: jax.Array, *,
                     prob: float, num_slots: int, replacement: Sequence[int] | None = None,
@@ -21,6 +23,8 @@ def corrupt_actions(keys: jax.Array, actions: jax.Array, prev_executed: jax.Arra
     marks the slots on which the channel fired (a replacement was drawn or the previous action
     repeated; a uniform replacement may equal the intended action).
     """
+    prob = unless_traced(check_probability, "prob", prob)
+    num_slots = check_int("num_slots", num_slots, 1)
     if not sticky and not replacement:
         raise ValueError("corrupt_actions: replacement must be a non-empty sequence of action "
                          "indices when sticky=False")

@@ -5,11 +5,13 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from stori_jax.checks import MAX_INT32, check_int, unless_traced
 from stori_jax.config import DRIFT_SCHEDULES
 
 
 def concept2_probability(episode_step: jax.Array, schedule: str, period: int) -> jax.Array:
     """P(concept 2) at 0-indexed agent step k of the episode (exact 0/1 except for gradual)."""
+    period = unless_traced(check_int, "period", period, 1, MAX_INT32)
     k = jnp.asarray(episode_step, jnp.int32)
     if schedule == "sudden":
         return (k >= period).astype(jnp.float32)

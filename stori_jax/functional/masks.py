@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from stori_jax.checks import check_probability, unless_traced
 from stori_jax.games.base import (CROP_REGIONS, SCREEN_HEIGHT, SCREEN_WIDTH,  # noqa: F401
                                   TORCH_MODE, TORCH_RADIUS, Region)
 
@@ -35,6 +36,7 @@ def draw_mask_decisions(keys: jax.Array, *, prob: float, per_frame: bool, torch:
     """Per env, for the two screens that make an observation: apply? (B, 2) bool and torch
     centres (B, 2, 2) int32 (x in [0,160), y in [0,210)).  At step granularity
     (``per_frame=False``) one draw covers both screens."""
+    prob = unless_traced(check_probability, "prob", prob)
     n = 2 if per_frame else 1
 
     def one_env(key):
