@@ -116,6 +116,11 @@ class _Owner:
         self._fresh = False
         return self._env.reset(seed=seed if reseed else None)
 
+    def _gym_seed(self, seed):
+        """The seed for gymnasium's own ``reset`` (np_random, np_random_seed): the one the env
+        plays on its first reset without a seed (gymnasium would draw a random one)."""
+        return self._seed if seed is None and getattr(self, "_np_random", None) is None else seed
+
     @staticmethod
     def _check_options(options):
         if options:  # None or {}: nothing asked
@@ -148,7 +153,7 @@ class StoriGymEnv(_Owner, gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         self._check_options(options)
         obs, info = self._reset_env(seed)  # checks the seed before gymnasium's np_random
-        super().reset(seed=seed)
+        super().reset(seed=self._gym_seed(seed))
         return _numpy(obs[0]), _first_env_info(info)
 
     def step(self, action):
@@ -178,7 +183,7 @@ class StoriVectorEnv(_Owner, VectorEnv):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         self._check_options(options)
         obs, info = self._reset_env(seed)
-        super().reset(seed=seed)  # np_random / np_random_seed, as gymnasium's vector envs
+        super().reset(seed=self._gym_seed(seed))  # np_random(_seed), as gymnasium's vector envs
         return _numpy(obs), _numpy_info(info)
 
     def step(self, actions):
