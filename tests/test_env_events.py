@@ -259,6 +259,21 @@ def test_boxing_displace_moves_boxers_to_each_others_start_corner():
         assert np.abs(ram[[33, 35]] - player0).max() <= 3, (k, ram[[33, 35]], player0)
 
 
+def test_events_fire_in_silence(capfd):
+    """Spec 9b: the reference's event code printed on every firing.  Here nothing is written to
+    stdout or stderr, by this process (an inline env) or by a worker, at every firing."""
+    env = make("Boxing", event(3, 1.0), num_envs=2, inline_envs=1)
+    try:
+        env.reset()
+        fired = sum(int(np.asarray(env.step(np.zeros(2, np.int32))[4]["event_fired"]).sum())
+                    for _ in range(5))
+    finally:
+        env.close()
+    assert fired == 2 * 5 * 4  # p = 1, per frame, two envs, five steps of four frames
+    out, err = capfd.readouterr()
+    assert out == "" and err == ""
+
+
 def test_the_episode_start_ram_is_read_before_the_no_ops():
     """Spec 9: the episode-start RAM is the RAM right after the reset.  With no-ops after the
     reset (noop_max 30) Boxing's enemy walks away from its start corner first; displacing

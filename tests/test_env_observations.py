@@ -143,6 +143,25 @@ def test_ram_obs_mode_changes_the_observation_only(game, mode):
         assert differs[masked].mean() > 0.5, "the rendered screens should differ from the twin's"
 
 
+@pytest.mark.parametrize("autoreset", [True, False])
+def test_ram_obs_mode_leaves_the_game_alone_across_episode_ends(autoreset):
+    """Spec 4.2: the rendered frame is not part of the game, across episode ends too: RAM,
+    rewards, ends and lives equal the twin's through three truncations at 40 frames (the
+    render must not count toward the frame cap, nor survive into the next episode)."""
+    kw = dict(obs="raw", max_episode_frames=40, autoreset=autoreset)
+    actions = actions_of("Breakout", 33)
+    runs = []
+    for config in (Config(observation=ObservationMask("ram", 2, 1.0)), None):
+        env = make("Breakout", config, **kw)
+        try:
+            runs.append(run_env(env, actions))
+        finally:
+            env.close()
+    run, twin = runs
+    assert_same_game(run, twin)
+    assert run.stacked("truncated")[:, 0].sum() == 3
+
+
 # the bytes each mode writes, from STORI_SPEC sections 5-8 (not from the library's tables);
 # None: the mode's condition is not met, nothing is rendered and the observation is the screen
 def _slots_equal(value):
