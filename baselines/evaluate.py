@@ -59,6 +59,7 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
     from stori_jax.provenance import software
     from tqdm import tqdm
 
+    made_with = software()  # before the episodes, not whatever is installed when they end
     if policy not in POLICIES:
         raise ValueError(f"policy must be one of {list(POLICIES)}, got {policy!r}")
     if (policy == "random") != (checkpoint is None):
@@ -121,7 +122,7 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
                 returns=flat, lengths=[n for env_lengths in lengths for n in env_lengths],
                 truncated=cut_off,
                 agent_steps=agent_steps, seconds=time.perf_counter() - start,
-                software=software())
+                software=made_with)
 
 
 def write_result(result: dict, out_dir: Path) -> Path:

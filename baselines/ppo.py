@@ -508,9 +508,11 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
           stop_after: int | None = None) -> dict:
     """Train PPO; write ``out``/config.json, log.csv, episodes.csv, checkpoint.pkl and
     summary.json.  ``resume`` continues from ``out``/checkpoint.pkl.  ``stop_after`` stops
-    (with a checkpoint) after that many iterations in total, as an interruption would."""
+    (with a checkpoint) after that many iterations in total, as an interruption would.  The
+    summary records the software this call started with (a resumed run: its last part's)."""
     from tqdm import tqdm
 
+    made_with = software()  # before training, not whatever is installed when it ends
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     ckpt_path, log_path, ep_path = out / "checkpoint.pkl", out / "log.csv", out / "episodes.csv"
@@ -598,7 +600,7 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
     summary = dict(config=dataclasses.asdict(config), iterations_done=last,
                    finished=last == config.num_iterations,
                    agent_steps=last * config.batch_size, train_seconds=elapsed,
-                   train_sps=last * config.batch_size / max(elapsed, 1e-9), software=software())
+                   train_sps=last * config.batch_size / max(elapsed, 1e-9), software=made_with)
     if summary["finished"]:
         (out / "summary.json").write_text(json.dumps(summary, indent=1))
     return dict(summary, iterations_now=last - start)  # 0: a resumed run had finished

@@ -82,6 +82,9 @@ def _check_evaluation(path: Path, result: dict) -> None:
                          f"{result['agent']!r} (random: 'random'; ppo: 'sampled' or 'greedy')")
     check_int(f"{path}: train_seed", result["train_seed"], 0)
     check_int(f"{path}: episodes", result["episodes"], 1)
+    for key, minimum in (("max_episode_frames", 1), ("truncated", 0)):  # older files lack them
+        if key in result:
+            check_int(f"{path}: {key}", result[key], minimum)
     check_real(f"{path}: mean_return", result["mean_return"])
     try:
         stori_jax.preset(result["game"], result["preset"])
@@ -258,7 +261,8 @@ def _hyperparameters(config: dict) -> dict:
 
 def evaluation_notes(rows: list[dict]) -> list[str]:
     """Evaluations in the table that a reader should know about: episodes cut off at the frame
-    cap (their returns stop there), and a row that compares evaluations under different caps."""
+    cap (their returns stop there), and a row that compares evaluations under different caps
+    (an older evaluation that did not record its cap is left out of that comparison)."""
     notes = []
     for r in rows:
         caps = set()
@@ -266,16 +270,15 @@ def evaluation_notes(rows: list[dict]) -> list[str]:
             cell = r[column]
             for seed, episodes, cap, cut in zip(cell["seeds"], cell["episodes"],
                                                 cell["max_episode_frames"], cell["truncated"]):
-                caps.add(cap)
+                if cap is not None:
+                    caps.add(cap)
                 if cut:
                     notes.append(f"{r['game']} {r['preset']} {column} seed {seed}: {cut} of "
                                  f"{episodes} episodes cut off at max_episode_frames {cap} (their "
                                  "returns stop there)")
         if len(caps) > 1:
-            shown = ", ".join("not recorded" if c is None else str(c)
-                              for c in sorted(caps, key=lambda c: (c is None, c)))
             notes.append(f"{r['game']} {r['preset']}: the evaluations ran under different frame "
-                         f"caps (max_episode_frames {shown})")
+                         f"caps (max_episode_frames {', '.join(map(str, sorted(caps)))})")
     return notes
 
 
@@ -348,8 +351,9 @@ def plot_curves(curves: dict, evaluations: list[dict], out_dir: Path,
 
 def build_table(results_dir: Path, out_dir: Path | None = None,
                 ppo_policy: str = "sampled") -> tuple[str, list[Path]]:
-    """Write table.md, table.json and curves-<game>.png into ``out_dir`` (default
-    ``results_dir``); returns (the markdown, the paths written)."""
+    """Write table.md (the table, then the notes), table.json and curves-<game>.png into
+    ``out_dir`` (default ``results_dir``), the notes also on stderr; returns (the markdown
+    table, the paths written)."""
     results_dir = Path(results_dir)
     out_dir = Path(out_dir) if out_dir is not None else results_dir
     evaluations = load_evaluations(results_dir)
@@ -358,9 +362,10 @@ def build_table(results_dir: Path, out_dir: Path | None = None,
     notes = table_notes(curves, evaluations, ppo_policy) + evaluation_notes(rows)
     for note in notes:
         print(f"stori-jax table: note: {note}", file=sys.stderr)
-    text = markdown(rows) + "".join(f"\n- {note}" for note in notes) + ("\n" if notes else "")
+    text = markdown(rows)
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "table.md").write_text(text)
+    (out_dir / "table.md").write_text(text + "".join(f"\n- {note}" for note in notes)
+                                      + ("\n" if notes else ""))
     (out_dir / "table.json").write_text(json.dumps(dict(ppo_policy=ppo_policy, rows=rows,
                                                         notes=notes), indent=1))
     return text, [out_dir / "table.md", out_dir / "table.json",

@@ -115,7 +115,7 @@ def main(argv=None):
     from stori_jax.provenance import software
 
     meta = dict(date=datetime.date.today().isoformat(), host=socket.gethostname(),
-                device=device, jax=jax.__version__, software=software())
+                device=device, software=software())
     lines = [f"# JAX-side cost per step (ms), {meta['date']} on {meta['host']} ({device})", "",
              "| stage | " + " | ".join(f"B = {b}" for b in args.sizes) + " |",
              "|---|" + "---|" * len(args.sizes)]

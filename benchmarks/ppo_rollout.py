@@ -12,7 +12,6 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
-import platform
 import time
 from pathlib import Path
 
@@ -152,7 +151,7 @@ def main(argv=None) -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / f"{stem}.json").write_text(json.dumps(dict(
         config={**vars(args), "out": str(args.out)},
-        machine=platform.processor() or platform.machine(), software=software(),
+        software=software(),
         results=results), indent=1))
     (args.out / f"{stem}.md").write_text(text)
     plot(stage_rates(results), args.out / f"{stem}.png", title=text.splitlines()[0])

@@ -29,7 +29,6 @@ import datetime
 import json
 import multiprocessing as mp
 import os
-import platform
 import socket
 import sys
 import time
@@ -434,7 +433,7 @@ def main(argv=None):
     from stori_jax.provenance import software
 
     meta = dict(date=datetime.date.today().isoformat(), host=socket.gethostname(),
-                cores=cores(), workers=args.workers, python=platform.python_version(),
+                cores=cores(), workers=args.workers,
                 seconds=args.seconds, argv=sys.argv[1:], software=software())
     results = add_ratios(run(args))
     args.out.mkdir(parents=True, exist_ok=True)

@@ -13,7 +13,6 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
-import platform
 from pathlib import Path
 
 import jax
@@ -102,8 +101,7 @@ def main(argv=None) -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     path["json"].write_text(json.dumps(dict(
         config={**vars(args), "out": str(args.out)},
-        machine=platform.processor() or platform.machine(), software=software(),
-        results=rows), indent=1))
+        software=software(), results=rows), indent=1))
     path["md"].write_text(text)
     bars = [(f"B={r['num_envs']}, {name}", r[key]) for r in rows
             for name, key in (("Python loop", "python_loop"), ("lax.scan over xla", "compiled_scan"))]

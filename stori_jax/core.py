@@ -15,7 +15,7 @@ import jax.numpy as jnp
 
 from stori_jax import functional as F
 from stori_jax.backends.layout import RESET_RENDER_BITS, STEP_RENDER_BITS
-from stori_jax.checks import MAX_SEED, check_int
+from stori_jax.checks import MAX_SEED, check_int, unless_traced
 from stori_jax.functional.preprocess import ATARI84, STACK
 from stori_jax.games import get_game
 from stori_jax.plan import Plan
@@ -57,8 +57,9 @@ def agent_key(seed: int) -> jax.Array:
     ``seed``.  Not ``jax.random.PRNGKey(seed)``: the env's chain starts there, and an agent
     splitting that key the env's way would sample its actions with the very keys the env's
     draws come from.  ``seed`` is an int in [0, 2^31 - 1], as an env's is (a larger one
-    would alias a smaller one's key)."""
-    return jax.random.fold_in(env_key(check_int("seed", seed, 0, MAX_SEED)), AGENT_STREAM)
+    would alias a smaller one's key); a traced one (under jit or vmap) is taken as it is."""
+    seed = unless_traced(check_int, "seed", seed, 0, MAX_SEED)
+    return jax.random.fold_in(env_key(seed), AGENT_STREAM)
 
 
 def initial_state(plan: Plan, seed: int) -> EnvState:

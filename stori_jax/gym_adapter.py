@@ -89,7 +89,10 @@ class _Owner:
                                  f"with next-step autoreset), got {name}={make_kwargs[name]!r}")
         self._make = lambda s: stori_jax.make(game, preset, num_envs=num_envs, seed=s,
                                               autoreset=False, **make_kwargs)
-        self._seed = 0 if seed is None else seed
+        from stori_jax.checks import MAX_SEED, check_int
+
+        # an int: gymnasium takes no numpy seed
+        self._seed = 0 if seed is None else check_int("seed", seed, 0, MAX_SEED)
         self._env = self._make(self._seed)
         self._fresh = True  # no reset yet: the env is exactly as made from self._seed
         self.closed = False
@@ -105,11 +108,12 @@ class _Owner:
         if isinstance(seed, (list, tuple, np.ndarray)):
             raise ValueError(f"seed must be one int for all envs (env i's emulator seed derives "
                              f"from it and i); per-env seed lists are not supported, got {seed!r}")
-        reseed = seed is not None and not (self._fresh and seed == self._seed)
-        if reseed:
+        if seed is not None:
             from stori_jax.checks import MAX_SEED, check_int
 
-            check_int("seed", seed, 0, MAX_SEED)  # a refused seed leaves the env as it was
+            seed = check_int("seed", seed, 0, MAX_SEED)  # a refused seed changes nothing
+        reseed = seed is not None and not (self._fresh and seed == self._seed)
+        if reseed:
             self._seed = seed  # asked for, so kept even if this reset fails (a worker dies)
         if self._env.closed:  # a worker died (the step said so): start again from the seed
             self._env, reseed = self._make(self._seed), False
@@ -117,9 +121,11 @@ class _Owner:
         return self._env.reset(seed=seed if reseed else None)
 
     def _gym_seed(self, seed):
-        """The seed for gymnasium's own ``reset`` (np_random, np_random_seed): the one the env
-        plays on its first reset without a seed (gymnasium would draw a random one)."""
-        return self._seed if seed is None and getattr(self, "_np_random", None) is None else seed
+        """The seed for gymnasium's own ``reset`` (np_random, np_random_seed), after
+        ``_reset_env``: the int the env plays, also on a first reset without a seed (gymnasium
+        would draw a random one); None on a later one (np_random goes on)."""
+        first = getattr(self, "_np_random", None) is None
+        return self._seed if seed is not None or first else None
 
     @staticmethod
     def _check_options(options):

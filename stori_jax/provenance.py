@@ -14,6 +14,9 @@ from pathlib import Path
 
 PACKAGES = ("stori-jax", "jax", "jaxlib", "ale-py", "numpy", "flax", "optax", "envpool")
 PACKAGE_DIR = Path(__file__).resolve().parent
+# the code, relative to the checkout: a change elsewhere (results, docs) leaves it clean
+CODE_PATHS = ("stori_jax", "envpool_bridge", "baselines", "benchmarks", "pyproject.toml",
+              ":!baselines/results", ":!benchmarks/results", ":!*.md")
 
 
 def package_versions() -> dict:
@@ -28,24 +31,24 @@ def package_versions() -> dict:
 
 
 def _git(*args: str) -> str | None:
-    try:
-        done = subprocess.run(["git", "-C", str(PACKAGE_DIR), *args], capture_output=True,
-                              text=True, timeout=10)
+    try:  # no optional locks: a status must not hold the index while the user commits
+        done = subprocess.run(["git", "--no-optional-locks", "-C", str(PACKAGE_DIR), *args],
+                              capture_output=True, text=True, timeout=10)
     except (OSError, subprocess.TimeoutExpired):  # no git here
         return None
     return done.stdout.strip() if done.returncode == 0 else None
 
 
 def code_commit() -> str | None:
-    """The git commit of the stori_jax code in use, with '+dirty' where tracked files differ
-    from it; None where the package is not in its own git checkout (an installed wheel)."""
+    """The git commit of the stori_jax code in use, with '+dirty' where tracked code (CODE_PATHS)
+    differs from it; None where the package is not in its own git checkout (an installed wheel)."""
     top = _git("rev-parse", "--show-toplevel")
     if top is None or Path(top).resolve() / "stori_jax" != PACKAGE_DIR:
         return None  # not a checkout of this project (a site-packages inside another repo)
     commit = _git("rev-parse", "HEAD")
     if commit is None:
         return None
-    changes = _git("status", "--porcelain", "--untracked-files=no")
+    changes = _git("-C", top, "status", "--porcelain", "--untracked-files=no", "--", *CODE_PATHS)
     return commit + ("+dirty" if changes else "")
 
 

@@ -19,6 +19,7 @@ from baselines import ppo
 from baselines.evaluate import evaluate, write_result
 from baselines.table import (PAPER_RESULTS, aggregate, build_table, learning_curves,
                              load_evaluations, markdown, smoothed)
+from stori_jax import provenance
 from stori_jax.cli import main
 from stori_jax.suite import episode_quotas
 
@@ -212,7 +213,8 @@ def test_training_writes_its_files(uninterrupted):
     assert {p.name for p in out.iterdir()} >= {"config.json", "log.csv", "episodes.csv",
                                               "checkpoint.pkl", "summary.json"}
     recorded = json.loads((out / "summary.json").read_text())["software"]
-    assert recorded["packages"]["jax"] == jax.__version__ and "commit" in recorded
+    assert recorded["packages"]["jax"] == jax.__version__
+    assert recorded["commit"] == provenance.code_commit()
     log = read_log(out)
     assert [int(r["global_step"]) for r in log] == [64, 128, 192]
     assert json.loads((out / "config.json").read_text())["network"] == "tiny"
@@ -341,14 +343,21 @@ def test_the_table_notes_evaluations_cut_off_at_the_frame_cap(tmp_path, capsys):
     notes = ["Breakout 3.1 PPO seed 7: 4 of 4 episodes cut off at max_episode_frames 400 "
              "(their returns stop there)",
              "Breakout 3.1: the evaluations ran under different frame caps (max_episode_frames "
-             "400, 108000, not recorded)"]
+             "400, 108000)"]
     err = capsys.readouterr().err
     table = json.loads((tmp_path / "out" / "table.json").read_text())
     assert table["notes"] == notes
     assert table["rows"][0]["PPO"]["truncated"] == [0, 4]
+    assert table["rows"][0]["Random"]["max_episode_frames"] == [None]
+    written = (tmp_path / "out" / "table.md").read_text()
+    assert written == text + "".join(f"\n- {note}" for note in notes) + "\n"
     for note in notes:
-        assert f"- {note}" in text and f"note: {note}" in err
-    assert (tmp_path / "out" / "table.md").read_text() == text
+        assert f"note: {note}" in err and note not in text  # printed once by stori-jax table
+    write_result(dict(game="Breakout", preset="3.1", agent="ppo", policy="sampled",
+                      train_seed=13, mean_return=1.0, episodes=4, max_episode_frames="400"),
+                 tmp_path / "ppo-seed13")
+    with pytest.raises(ValueError, match="max_episode_frames must be an int >= 1, got '400'"):
+        build_table(tmp_path, tmp_path / "out")
 
 
 def test_the_table_joins_a_preset_spelt_in_lower_case_to_its_row(tmp_path):

@@ -212,7 +212,7 @@ def test_np_random_seed_is_the_seed_the_env_plays(vector):
     """A first reset without a seed plays the env's seed (0, or make's seed=), and gymnasium's
     np_random_seed says so (it was a random 128-bit number); a later plain reset keeps it, a
     reset(seed=k) makes it k."""
-    for made_with, played in (({}, 0), ({"seed": 5}, 5)):
+    for made_with, played in (({}, 0), ({"seed": 5}, 5), ({"seed": np.int64(5)}, 5)):
         env = (gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, obs="ram", **made_with)
                if vector else gym.make("stori_jax/Breakout-3.1-v0", obs="ram", **made_with))
         try:
@@ -220,7 +220,7 @@ def test_np_random_seed_is_the_seed_the_env_plays(vector):
             assert env.np_random_seed == played
             env.reset()
             assert env.np_random_seed == played
-            env.reset(seed=2)
+            env.reset(seed=np.int64(2))  # gymnasium itself takes Python ints only
             assert env.np_random_seed == 2
         finally:
             env.close()

@@ -14,9 +14,13 @@ def test_software_names_the_packages_and_the_code():
     assert found["packages"]["jax"] == jax.__version__
     assert set(found["packages"]) == set(provenance.PACKAGES)
     assert found["python"].count(".") == 2 and found["machine"]
-    commit = found["commit"]
-    assert commit is None or (len(commit.removesuffix("+dirty")) == 40
-                              and int(commit.removesuffix("+dirty"), 16) >= 0)
+    repo = provenance.PACKAGE_DIR.parent
+    if shutil.which("git") and (repo / ".git").exists():  # this checkout: its HEAD
+        head = subprocess.run(["git", "-C", str(repo), "rev-parse", "HEAD"], check=True,
+                              capture_output=True, text=True).stdout.strip()
+        assert found["commit"].removesuffix("+dirty") == head
+    else:  # an installed package, or no git
+        assert found["commit"] is None
 
 
 @pytest.fixture
@@ -25,6 +29,10 @@ def checkout(tmp_path, monkeypatch):
     package = tmp_path / "repo" / "stori_jax"
     package.mkdir(parents=True)
     (package / "core.py").write_text("x = 1\n")
+    results = tmp_path / "repo" / "baselines" / "results"
+    results.mkdir(parents=True)
+    (results / "table.json").write_text("{}\n")
+    (tmp_path / "repo" / "README.md").write_text("docs\n")
     monkeypatch.setattr(provenance, "PACKAGE_DIR", package.resolve())
     if shutil.which("git") is None:
         return None
@@ -44,6 +52,8 @@ def test_the_commit_is_the_checkouts_and_says_when_tracked_files_changed(checkou
     package, head = checkout
     assert provenance.code_commit() == head
     (package / "notes.txt").write_text("untracked files do not count\n")
+    (package.parent / "baselines" / "results" / "table.json").write_text("[]\n")
+    (package.parent / "README.md").write_text("results and docs are not the code\n")
     assert provenance.code_commit() == head
     (package / "core.py").write_text("x = 2\n")
     assert provenance.code_commit() == head + "+dirty"

@@ -127,6 +127,10 @@ def test_agent_key_takes_the_seeds_an_env_takes():
                        (True, "an int in [0, 2147483647], got True")):
         with pytest.raises(ValueError, match=re.escape(f"seed must be {shown}")):
             stori_jax.agent_key(bad)
+    # a traced seed has no number to check yet: one key per seed, under vmap and jit
+    many = jax.vmap(stori_jax.agent_key)(jnp.arange(3))
+    assert (np.asarray(many[2]) == np.asarray(stori_jax.agent_key(2))).all()
+    assert (np.asarray(jax.jit(stori_jax.agent_key)(2)) == np.asarray(many[2])).all()
 
 
 def test_rollout_rejects_bad_arguments():
