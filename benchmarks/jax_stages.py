@@ -110,12 +110,12 @@ def main(argv=None):
     parser.add_argument("--out", type=Path, default=HERE / "results")
     args = parser.parse_args(argv)
     require_at_least_one(parser, sizes=args.sizes)
-    device = str(jax.devices()[0])
-    results = measure(args.sizes)
     from stori_jax.provenance import software
 
+    device = str(jax.devices()[0])
     meta = dict(date=datetime.date.today().isoformat(), host=socket.gethostname(),
                 device=device, software=software())
+    results = measure(args.sizes)
     lines = [f"# JAX-side cost per step (ms), {meta['date']} on {meta['host']} ({device})", "",
              "| stage | " + " | ".join(f"B = {b}" for b in args.sizes) + " |",
              "|---|" + "---|" * len(args.sizes)]

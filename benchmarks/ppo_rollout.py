@@ -143,6 +143,7 @@ def main(argv=None) -> None:
     config = ppo.PPOConfig(game=game, preset=args.preset,
                            **{**GAME_HYPERPARAMETERS.get(game, EVIDENCE_HYPERPARAMETERS),
                               "network": args.network})
+    made_with = software()  # when the run starts
     results = measure(config, args.repeats)
     text = markdown(config, results)
     print(text)
@@ -151,8 +152,7 @@ def main(argv=None) -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / f"{stem}.json").write_text(json.dumps(dict(
         config={**vars(args), "out": str(args.out)},
-        software=software(),
-        results=results), indent=1))
+        software=made_with, results=results), indent=1))
     (args.out / f"{stem}.md").write_text(text)
     plot(stage_rates(results), args.out / f"{stem}.png", title=text.splitlines()[0])
     print(f"wrote {args.out / stem}.json, .md and .png")

@@ -91,6 +91,7 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
     require_at_least_one(parser, sizes=args.sizes, steps=args.steps, repeats=args.repeats)
     args.game, args.preset = stori_game_and_preset(parser, args.game, args.preset)
+    made_with = software()  # when the run starts
     rows = [measure(args.game, args.preset, b, args.steps, args.repeats)
             for b in tqdm(args.sizes, desc="batch sizes")]
     text = markdown(args.game, args.preset, args.steps, rows)
@@ -101,7 +102,7 @@ def main(argv=None) -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     path["json"].write_text(json.dumps(dict(
         config={**vars(args), "out": str(args.out)},
-        software=software(), results=rows), indent=1))
+        software=made_with, results=rows), indent=1))
     path["md"].write_text(text)
     bars = [(f"B={r['num_envs']}, {name}", r[key]) for r in rows
             for name, key in (("Python loop", "python_loop"), ("lax.scan over xla", "compiled_scan"))]

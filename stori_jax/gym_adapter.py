@@ -28,6 +28,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 
+from stori_jax.checks import MAX_SEED, check_int
+
 NAMESPACE = "stori_jax"
 
 
@@ -89,8 +91,6 @@ class _Owner:
                                  f"with next-step autoreset), got {name}={make_kwargs[name]!r}")
         self._make = lambda s: stori_jax.make(game, preset, num_envs=num_envs, seed=s,
                                               autoreset=False, **make_kwargs)
-        from stori_jax.checks import MAX_SEED, check_int
-
         # an int: gymnasium takes no numpy seed
         self._seed = 0 if seed is None else check_int("seed", seed, 0, MAX_SEED)
         self._env = self._make(self._seed)
@@ -109,8 +109,6 @@ class _Owner:
             raise ValueError(f"seed must be one int for all envs (env i's emulator seed derives "
                              f"from it and i); per-env seed lists are not supported, got {seed!r}")
         if seed is not None:
-            from stori_jax.checks import MAX_SEED, check_int
-
             seed = check_int("seed", seed, 0, MAX_SEED)  # a refused seed changes nothing
         reseed = seed is not None and not (self._fresh and seed == self._seed)
         if reseed:

@@ -140,6 +140,7 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
     import stori_jax
     from stori_jax.visual import contact_sheet
 
+    made_with = software()  # when the run starts
     out = Path(out) if out else Path("results") / f"suite-{datetime.date.today().isoformat()}"
     policy = agent = None
     if checkpoint is not None:
@@ -163,7 +164,7 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
             contact_sheet(game, name, stori_jax.preset(game, name), written[-1], seed=seed)
     (out / "results.json").write_text(json.dumps(dict(
         agent=agent or "random", seed=seed, episodes=episodes, num_envs=num_envs,
-        max_steps=max_steps, software=software(), rows=rows),
+        max_steps=max_steps, software=made_with, rows=rows),
         indent=1))
     text = f"Agent: {agent or 'uniformly random policy'}\n\n" + table(rows)
     if gallery:
