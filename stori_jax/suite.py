@@ -6,7 +6,10 @@ from __future__ import annotations
 
 import datetime
 import json
+import os
+import shutil
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -155,13 +158,23 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
         agent = str(checkpoint)
     out.mkdir(parents=True, exist_ok=True)
     rows, written = [], [out / "results.json", out / "table.md"]
-    for game, name in tqdm(presets, desc="suite", unit="preset", disable=not progress):
-        rows.append(run_preset(game, name, episodes=episodes, num_envs=num_envs,
-                               max_steps=max_steps, seed=seed, policy=policy,
-                               progress=progress))
-        if gallery:
+    # the sheets wait in a hidden folder until the run has finished: an interrupted run leaves
+    # the earlier run's gallery, table and JSON as they were, not a mix of two runs
+    staging = Path(tempfile.mkdtemp(dir=out, prefix=".suite-partial-"))
+    try:
+        for game, name in tqdm(presets, desc="suite", unit="preset", disable=not progress):
+            rows.append(run_preset(game, name, episodes=episodes, num_envs=num_envs,
+                                   max_steps=max_steps, seed=seed, policy=policy,
+                                   progress=progress))
+            if gallery:
+                contact_sheet(game, name, stori_jax.preset(game, name),
+                              sheet_path(staging, game, name), seed=seed)
+        for game, name in presets if gallery else ():
             written.append(sheet_path(out, game, name))
-            contact_sheet(game, name, stori_jax.preset(game, name), written[-1], seed=seed)
+            written[-1].parent.mkdir(exist_ok=True)
+            os.replace(sheet_path(staging, game, name), written[-1])
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
     (out / "results.json").write_text(json.dumps(dict(
         agent=agent or "random", seed=seed, episodes=episodes, num_envs=num_envs,
         max_steps=max_steps, software=made_with, rows=rows),

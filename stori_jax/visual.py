@@ -23,6 +23,27 @@ def _pil():
     return Image, ImageDraw
 
 
+def _save_whole(path: Path, save) -> Path:
+    """``save(tmp)`` beside ``path``, then renamed to it: an interrupted write (Ctrl-C while a
+    long GIF is encoded) leaves no half-written file and an earlier one as it was."""
+    import os
+    import tempfile
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    # the same extension, from which Pillow takes the format
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.partial.",
+                               suffix=path.suffix)
+    os.close(fd)
+    try:
+        save(tmp)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+    return path
+
+
 def twin_run(game: str, config: Config, steps: int, seed: int = 0, *, with_twin: bool = True,
              progress: str | None = None):
     """Run ``config`` and its 3.1 twin side by side on the same intended actions (the same
@@ -36,9 +57,10 @@ def twin_run(game: str, config: Config, steps: int, seed: int = 0, *, with_twin:
     import stori_jax
 
     rng = np.random.default_rng(seed)
-    env = stori_jax.make(game, config=config, num_envs=1, seed=seed, obs="raw", num_workers=1)
-    twin = (stori_jax.make(game, num_envs=1, seed=seed, obs="raw", num_workers=1)
-            if with_twin else None)
+    # no autoreset: the step that ends the episode shows its last screen, not the next one's first
+    kw = dict(num_envs=1, seed=seed, obs="raw", num_workers=1, autoreset=False)
+    env = stori_jax.make(game, config=config, **kw)
+    twin = stori_jax.make(game, **kw) if with_twin else None
 
     def screen(obs):  # env 0's screen of a batch of one, if there is one
         return None if obs is None else np.asarray(obs[0])
@@ -115,10 +137,7 @@ def contact_sheet(game: str, name: str, config: Config, path: Path, *, steps: in
             draw.text((x, y + 2), _caption(f) if r else f"step {f['step']}",
                       fill=(230, 230, 120))
             sheet.paste(Image.fromarray(f[key]), (x, y + top))
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    sheet.save(path)
-    return path
+    return _save_whole(path, sheet.save)
 
 
 def record_episode(game: str, name: str, config: Config, path: Path, *, max_steps: int = 1000,
@@ -138,8 +157,6 @@ def record_episode(game: str, name: str, config: Config, path: Path, *, max_step
             draw.text((4, 20), f"intended {f['action']}  executed {f['executed']}",
                       fill=(200, 200, 200))
         images.append(img)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    images[0].save(path, save_all=True, append_images=images[1:], duration=50, loop=0,
-                   optimize=False)
-    return path
+    return _save_whole(path, lambda tmp: images[0].save(
+        tmp, save_all=True, append_images=images[1:], duration=50, loop=0,
+        optimize=False))

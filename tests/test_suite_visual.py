@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+import stori_jax
 from stori_jax.cli import main
 
 
@@ -57,6 +58,66 @@ def test_a_suite_run_replaces_an_earlier_runs_files_and_nothing_else(tmp_path, c
     assert all(path.read_text() == "earlier" for path in mine)
     rows = json.loads((out / "results.json").read_text())["rows"]
     assert [(r["game"], r["preset"]) for r in rows] == [("Breakout", "1")]
+
+
+def test_a_suite_run_stopped_after_some_sheets_leaves_the_earlier_run_whole(tmp_path,
+                                                                          monkeypatch):
+    """A run into the folder of an earlier one, stopped after its first preset (a Ctrl-C):
+    the earlier table and sheets stay as they were (the new first sheet used to replace the
+    old one beside the old table), and no staging folder is left behind."""
+    import stori_jax.suite
+
+    out = tmp_path / "suite"
+    (out / "gallery").mkdir(parents=True)
+    earlier = [out / "table.md", out / "results.json", out / "gallery" / "Breakout-1.png"]
+    for path in earlier:
+        path.write_text("earlier")
+    played = []
+    real = stori_jax.suite.run_preset
+
+    def stops_at_the_second(*args, **kwargs):
+        if played:
+            raise KeyboardInterrupt
+        played.append(args)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(stori_jax.suite, "run_preset", stops_at_the_second)
+    assert main(["suite", "--games", "Breakout", "--presets", "1", "2.1", "--episodes", "1",
+                 "--num-envs", "2", "--max-steps", "20", "--out", str(out), "--quiet"]) == 130
+    assert played and all(path.read_text() == "earlier" for path in earlier)
+    assert sorted(p.name for p in out.rglob("*")) == ["Breakout-1.png", "gallery",
+                                                      "results.json", "table.md"]
+
+
+def test_an_interrupted_picture_leaves_the_earlier_file(tmp_path):
+    """Ctrl-C while a long GIF is encoded left a 0-byte file in place of the earlier one."""
+    from stori_jax.visual import _save_whole
+
+    path = tmp_path / "episode.gif"
+    path.write_bytes(b"earlier")
+
+    def interrupted(tmp):
+        with open(tmp, "wb") as f:
+            f.write(b"half")
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        _save_whole(path, interrupted)
+    assert path.read_bytes() == b"earlier" and [p.name for p in tmp_path.iterdir()] == [
+        "episode.gif"]
+    _save_whole(path, lambda tmp: Image.new("RGB", (2, 2)).save(tmp))
+    assert Image.open(path).format == "GIF"
+
+
+def test_pictures_end_on_the_episodes_last_screen():
+    """The step that ends an episode showed the next episode's first screen (autoreset):
+    Breakout's last frame read score 000 and 5 lives again."""
+    from stori_jax.visual import twin_run
+
+    frames = twin_run("Breakout", stori_jax.preset("Breakout", "3.1"), 400, seed=0,
+                      with_twin=False)
+    assert len(frames) < 401, "the episode should end within 400 steps"
+    assert (frames[-1]["preset"] != frames[0]["preset"]).any()
 
 
 def test_show_puts_the_mask_on_the_preset_side_only(tmp_path):
