@@ -32,10 +32,14 @@ def stori_game(name: str) -> str:
     and evaluate on the paper's presets)."""
     import stori_jax
 
-    game = stori_jax.get_game(name).name  # unknown to ale-py: a clear ValueError
+    allowed = (f"game must be one of the STORI games {list(stori_jax.STORI_GAMES)} (the "
+               "baselines play the paper's presets)")
+    try:
+        game = stori_jax.get_game(name).name
+    except ValueError:  # not even an ale-py game: name only the games allowed here
+        raise ValueError(f"unknown game {name!r}: {allowed}") from None
     if game not in stori_jax.STORI_GAMES:
-        raise ValueError(f"game must be one of the STORI games {list(stori_jax.STORI_GAMES)} "
-                         f"(the baselines play the paper's presets), got {name!r}")
+        raise ValueError(f"{allowed}, got {name!r}")
     return game
 
 

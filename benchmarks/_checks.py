@@ -15,6 +15,16 @@ def require_at_least_one(parser: argparse.ArgumentParser, **options) -> None:
             parser.error(f"--{name.replace('_', '-')}: must be >= 1, got {value}")
 
 
+def output_directory(parser: argparse.ArgumentParser, path) -> None:
+    """--out must be a directory that can be written, checked before anything is measured."""
+    from stori_jax.cli import check_out
+
+    try:
+        check_out("--out", path, directory=True)
+    except ValueError as error:
+        parser.error(str(error))
+
+
 def stori_games(parser: argparse.ArgumentParser, flag: str, names: list[str]) -> list[str]:
     """The STORI games ``names`` name, spelt canonically ('breakout' is Breakout)."""
     from baselines.evaluate import stori_game

@@ -22,7 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from _checks import require_at_least_one  # this folder is on sys.path when run as a script
+from _checks import output_directory, require_at_least_one  # this folder: on sys.path
 
 HERE = Path(__file__).resolve().parent
 
@@ -110,6 +110,7 @@ def main(argv=None):
     parser.add_argument("--out", type=Path, default=HERE / "results")
     args = parser.parse_args(argv)
     require_at_least_one(parser, sizes=args.sizes)
+    output_directory(parser, args.out)
     from stori_jax.provenance import software
 
     device = str(jax.devices()[0])

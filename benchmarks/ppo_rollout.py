@@ -22,7 +22,8 @@ import stori_jax
 from baselines import ppo
 from stori_jax.provenance import software
 from baselines.run_evidence import EVIDENCE_HYPERPARAMETERS, GAME_HYPERPARAMETERS
-from _checks import require_at_least_one, stori_game_and_preset  # this folder is on sys.path
+from _checks import (output_directory, require_at_least_one,  # this folder: on sys.path
+                     stori_game_and_preset)
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -139,6 +140,7 @@ def main(argv=None) -> None:
     parser.add_argument("--out", type=Path, default=RESULTS, help="directory for the results")
     args = parser.parse_args(argv)
     require_at_least_one(parser, repeats=args.repeats)
+    output_directory(parser, args.out)
     game, args.preset = stori_game_and_preset(parser, args.game, args.preset)
     config = ppo.PPOConfig(game=game, preset=args.preset,
                            **{**GAME_HYPERPARAMETERS.get(game, EVIDENCE_HYPERPARAMETERS),

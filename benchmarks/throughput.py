@@ -38,7 +38,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from _checks import require_at_least_one, stori_games  # noqa: E402  (this folder)
+from _checks import output_directory, require_at_least_one, stori_games  # noqa: E402  (this folder)
 
 FRAME_SKIP = 4
 WINDOWS = 3  # each rate is the median over this many equal windows (the machine is noisy)
@@ -330,7 +330,8 @@ def markdown(results, meta) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plots(results, stem: Path, batch: int):
+def plots(results, stem: Path, batch: int) -> list[Path]:
+    """The PNGs the results allow (a sweep over B, the per-preset runs); returns their paths."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -346,9 +347,9 @@ def plots(results, stem: Path, batch: int):
         series.setdefault(label, []).append((r["B"], r["steps_per_s"]))
     series = {label: sorted(set(points)) for label, points in series.items()
               if len({b for b, _ in points}) > 1}
-    if series:  # a sweep over B was run
-        _plot_vs_batch(plt, series, stem)
-    _plot_presets(plt, results, stem, batch)
+    written = [_plot_vs_batch(plt, series, stem)] if series else []  # a sweep over B was run
+    presets = _plot_presets(plt, results, stem, batch)
+    return written + ([presets] if presets is not None else [])
 
 
 def _plot_vs_batch(plt, series, stem: Path):
@@ -362,15 +363,17 @@ def _plot_vs_batch(plt, series, stem: Path):
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(stem.with_name(stem.name + "-vs-batch.png"), dpi=120)
+    path = stem.with_name(stem.name + "-vs-batch.png")
+    fig.savefig(path, dpi=120)
     plt.close(fig)
+    return path
 
 
 def _plot_presets(plt, results, stem: Path, batch: int):
     rows = [r for r in results if r["kind"] in ("stori-jax", "naive gymnasium")
             and r["B"] == batch and r.get("vs_limit") is not None]  # the per-preset runs
     if not rows:
-        return
+        return None
     labels = sorted({f"{r['game']} {r['preset']}" for r in rows},
                     key=lambda s: (s.split()[0], s.split()[1]))
     kinds = sorted({(r["kind"], r["backend"], r["obs"]) for r in rows})
@@ -390,12 +393,14 @@ def _plot_presets(plt, results, stem: Path, batch: int):
     ax.set_title("Per preset, as a fraction of the emulator limit")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(stem.with_name(stem.name + "-presets.png"), dpi=120)
+    path = stem.with_name(stem.name + "-presets.png")
+    fig.savefig(path, dpi=120)
     plt.close(fig)
+    return path
 
 
 def _check_arguments(parser, args):
-    import stori_jax
+    from stori_jax.cli import selected_presets
     from stori_jax.presets import spelt_as_the_paper
 
     if not args.seconds > 0:
@@ -403,12 +408,13 @@ def _check_arguments(parser, args):
     require_at_least_one(parser, batch=args.batch, workers=args.workers, sizes=args.sizes)
     if args.games is not None:
         args.games = stori_games(parser, "--games", args.games)
-    names = sorted({p for _, p in stori_jax.list_presets()})
-    for preset in args.presets or ():
-        if spelt_as_the_paper(preset) not in names:
-            parser.error(f"--presets: {preset!r} is not one of {names}")
+    try:  # the suite's check: every preset named must belong to one of the games
+        selected_presets(args.games or (["Breakout"] if args.quick else None), args.presets)
+    except ValueError as error:
+        parser.error(str(error))
     if args.presets is not None:
         args.presets = [spelt_as_the_paper(preset) for preset in args.presets]
+    output_directory(parser, args.out)
 
 
 def main(argv=None):
@@ -442,9 +448,9 @@ def main(argv=None):
     Path(f"{stem}.json").write_text(json.dumps(dict(meta=meta, results=results), indent=1))
     table = markdown(results, meta)
     Path(f"{stem}.md").write_text(table)
-    plots(results, stem, args.batch)
+    pictures = plots(results, stem, args.batch)
     print(table)
-    print(f"wrote {stem}.json, {stem}.md and PNG plots")
+    print("wrote " + ", ".join(str(p) for p in [f"{stem}.json", f"{stem}.md", *pictures]))
 
 
 if __name__ == "__main__":

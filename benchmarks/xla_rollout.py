@@ -22,7 +22,8 @@ from tqdm import tqdm
 import stori_jax
 from baselines import ppo
 from stori_jax.provenance import software
-from _checks import require_at_least_one, stori_game_and_preset  # this folder is on sys.path
+from _checks import (output_directory, require_at_least_one,  # this folder: on sys.path
+                     stori_game_and_preset)
 from ppo_rollout import median_rate, plot
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -90,6 +91,7 @@ def main(argv=None) -> None:
     parser.add_argument("--out", type=Path, default=RESULTS, help="directory for the results")
     args = parser.parse_args(argv)
     require_at_least_one(parser, sizes=args.sizes, steps=args.steps, repeats=args.repeats)
+    output_directory(parser, args.out)
     args.game, args.preset = stori_game_and_preset(parser, args.game, args.preset)
     made_with = software()  # when the run starts
     rows = [measure(args.game, args.preset, b, args.steps, args.repeats)

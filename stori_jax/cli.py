@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import sys
 import tempfile
 from pathlib import Path
@@ -41,9 +42,15 @@ def _cmd_run(args) -> int:
     import stori_jax
     from stori_jax.suite import play
 
-    env = stori_jax.make(args.game, args.preset, num_envs=args.num_envs, seed=args.seed,
-                         num_workers=args.num_workers, obs=args.obs,
-                         granularity=args.granularity)
+    check_int("--steps", args.steps, 1)
+    try:
+        env = stori_jax.make(args.game, args.preset, num_envs=args.num_envs, seed=args.seed,
+                             num_workers=args.num_workers, obs=args.obs,
+                             granularity=args.granularity)
+    except ValueError as error:  # make's rules, worded with the command's flags
+        raise ValueError(re.sub(r"\b(num_envs|num_workers|seed)\b",
+                                lambda m: "--" + m.group(1).replace("_", "-"),
+                                str(error))) from None
     print(f"{env}")
     with env:
         obs, _ = env.reset()
@@ -98,7 +105,9 @@ def _check_writable(flag: str, path: Path, directory: Path) -> None:
                          f"({e.strerror or e})") from None
 
 
-def _selected_presets(games, presets):
+def selected_presets(games, presets):
+    """The paper's (game, preset) pairs that ``--games`` and ``--presets`` choose (None: all);
+    a ValueError naming the flag for an unknown game or a preset none of the games has."""
     from stori_jax import list_presets
     from stori_jax.presets import preset as check_preset
     from stori_jax.presets import spelt_as_the_paper
@@ -133,7 +142,7 @@ def _cmd_suite(args) -> int:
         from baselines.ppo import load_checkpoint
 
         games = [load_checkpoint(args.checkpoint)["config"]["game"]]
-    out = run_suite(_selected_presets(games, args.presets), episodes=args.episodes,
+    out = run_suite(selected_presets(games, args.presets), episodes=args.episodes,
                     num_envs=args.num_envs, max_steps=args.max_steps, seed=args.seed,
                     out=args.out, gallery=not args.no_gallery, progress=not args.quiet,
                     checkpoint=args.checkpoint)

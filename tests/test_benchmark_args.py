@@ -18,7 +18,9 @@ def script(monkeypatch, name: str):
     ("throughput", ["--batch", "0"], "--batch: must be >= 1, got 0"),
     ("throughput", ["--sizes", "8", "-1"], "--sizes: must be >= 1, got [8, -1]"),
     ("throughput", ["--workers", "0"], "--workers: must be >= 1"),
-    ("throughput", ["--presets", "9.9"], "--presets: '9.9' is not one of"),
+    ("throughput", ["--presets", "9.9"], "--presets: unknown ['9.9']; allowed: ['1', "),
+    ("throughput", ["--games", "Gopher", "--presets", "3.2A"],
+     "--presets: unknown ['3.2A']; allowed for Gopher: ['1', '2.1', '2.2', '3.1', '3.2']"),
     ("throughput", ["--games", "Breakout", "Pong"], "--games: game must be one of the STORI"),
     ("jax_stages", ["--sizes", "0"], "--sizes: must be >= 1, got [0]"),
     ("ppo_rollout", ["--repeats", "0"], "--repeats: must be >= 1, got 0"),
@@ -26,6 +28,9 @@ def script(monkeypatch, name: str):
      "--preset: unknown preset '2' for Breakout: allowed ['1', '2.1'"),
     ("xla_rollout", ["--steps", "0"], "--steps: must be >= 1, got 0"),
     ("xla_rollout", ["--game", "Pong"], "--game: game must be one of the STORI games"),
+    ("xla_rollout", ["--game", "Nope"], "--game: unknown game 'Nope': game must be one of the "
+                                        "STORI games ['Breakout', 'Boxing', 'Gopher', "
+                                        "'BankHeist'] (the baselines play the paper's presets)"),
     ("xla_rollout", ["--game", "boxing", "--preset", "3.3"],
      "--preset: unknown preset '3.3' for Boxing: allowed"),
 ])
@@ -38,6 +43,18 @@ def test_bad_arguments_are_usage_errors_naming_the_option(monkeypatch, capsys, t
     assert not any(tmp_path.iterdir())  # refused before measuring or writing anything
 
 
+@pytest.mark.parametrize("name", ["throughput", "jax_stages", "xla_rollout", "ppo_rollout"])
+def test_an_unusable_out_is_refused_before_measuring(monkeypatch, capsys, tmp_path, name):
+    """--out naming a file (or a folder that cannot be made) ran the whole measurement, then
+    failed with a traceback from mkdir."""
+    a_file = tmp_path / "results"
+    a_file.write_text("not a folder")
+    with pytest.raises(SystemExit) as exit_info:
+        script(monkeypatch, name).main(["--out", str(a_file)])
+    assert exit_info.value.code == 2
+    assert f"--out {a_file} exists and is not a directory" in capsys.readouterr().err
+
+
 def test_preset_names_are_spelt_as_the_paper_does(monkeypatch):
     """'3.2a' was refused by throughput.py and written as '3.2a' into the file names of the
     rollout benchmarks; every script now takes any case and spells it 3.2A."""
@@ -46,7 +63,7 @@ def test_preset_names_are_spelt_as_the_paper_does(monkeypatch):
     throughput = script(monkeypatch, "throughput")
     parser = argparse.ArgumentParser()
     args = argparse.Namespace(seconds=1.0, batch=8, workers=1, sizes=[8], games=None,
-                              presets=["3.2a", "2.1"])
+                              presets=["3.2a", "2.1"], quick=False, out=Path("results"))
     throughput._check_arguments(parser, args)
     assert args.presets == ["3.2A", "2.1"]
     checks = script(monkeypatch, "_checks")

@@ -142,6 +142,11 @@ def test_resume_from_a_checkpoint_without_its_run_state_says_what_is_missing(fil
     # flags named as the user typed them (it said seed / total_steps)
     (["suite", "--seed", "3000000000"], "--seed must be in [0, 2147483647], got 3000000000"),
     (["run", "Breakout", "--seed", "3000000000"], "--seed must be in [0, 2147483647]"),
+    (["run", "Breakout", "2.1", "--num-envs", "0"], "--num-envs must be >= 1, got 0"),
+    (["run", "Breakout", "--num-workers", "-3"], "--num-workers must be >= 0, got -3"),
+    (["run", "Breakout", "--num-workers", "5", "--num-envs", "2"],
+     "--num-workers must be <= --num-envs (2), got 5"),
+    (["run", "Breakout", "--steps", "0"], "--steps must be >= 1, got 0"),
     (["record", "Breakout", "--seed", "2147483648"], "--seed must be in [0, 2147483647]"),
     (["eval", "--random", "--game", "Breakout", "--preset", "3.1", "--eval-seed", "2147483648"],
      "--eval-seed must be in [0, 2147483647], got 2147483648"),
