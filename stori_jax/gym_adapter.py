@@ -74,6 +74,8 @@ class _Owner:
         import stori_jax
 
         registered = make_kwargs.pop("registered_as", None)
+        if registered is not None:  # a spec saved as JSON or YAML gives it back as a list
+            registered = tuple(registered)
         if registered is not None and "config" in make_kwargs:
             raise ValueError(f"config: the id {env_id(*registered)} fixes the preset; for a "
                              "Config of your own use stori_jax.gym_adapter.StoriGymEnv(game, "
@@ -81,6 +83,10 @@ class _Owner:
         if registered is not None and not _names(game, preset, registered):
             raise ValueError(f"this id is {env_id(*registered)}: it fixes game and preset, got "
                              f"game={game!r} preset={preset!r}; use that preset's own id")
+        if "max_episode_steps" in make_kwargs:  # gymnasium's TimeLimit, in make_vec's default mode
+            raise ValueError("max_episode_steps: a stori_jax vector env caps episodes in emulator "
+                             "frames: pass max_episode_frames (steps x frame_skip), got "
+                             f"max_episode_steps={make_kwargs['max_episode_steps']!r}")
         if make_kwargs.pop("render_mode", None) is not None:
             raise ValueError("render_mode: stori_jax envs do not render (render_modes []); "
                              "use `stori-jax record` for videos")

@@ -104,6 +104,21 @@ def test_vector_env_next_step_autoreset():
         envs.close()
 
 
+def test_a_spec_saved_as_json_makes_the_env_again_and_max_episode_steps_is_named():
+    """A spec through JSON (an experiment's saved config) came back with its id's game and
+    preset as a list and was refused as contradicting itself; max_episode_steps in make_vec's
+    default mode was a TypeError from make, not a pointer to max_episode_frames."""
+    spec = gym.envs.registration.EnvSpec.from_json(gym.spec("stori_jax/Breakout-3.1-v0").to_json())
+    env = gym.make(spec, obs="ram")
+    try:
+        assert env.reset(seed=1)[0].shape == (128,)
+    finally:
+        env.close()
+    with pytest.raises(ValueError, match=r"max_episode_steps: .* pass max_episode_frames "
+                                         r"\(steps x frame_skip\), got max_episode_steps=100"):
+        gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, max_episode_steps=100)
+
+
 @pytest.mark.parametrize("kwargs,pattern", [
     (dict(game="Boxing"), r"fixes game and preset, got game='Boxing' preset='2\.1'"),
     (dict(preset="1"), r"fixes game and preset, got game='Breakout' preset='1'"),
