@@ -38,7 +38,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from _checks import output_directory, require_at_least_one, stori_games  # noqa: E402  (this folder)
+from _checks import output_directory, require_at_least_one, stori_games  # noqa: E402
 
 FRAME_SKIP = 4
 WINDOWS = 3  # each rate is the median over this many equal windows (the machine is noisy)

@@ -83,7 +83,7 @@ class _Owner:
         if registered is not None and not _names(game, preset, registered):
             raise ValueError(f"this id is {env_id(*registered)}: it fixes game and preset, got "
                              f"game={game!r} preset={preset!r}; use that preset's own id")
-        if "max_episode_steps" in make_kwargs:  # gymnasium's TimeLimit, in make_vec's default mode
+        if "max_episode_steps" in make_kwargs:  # gymnasium's TimeLimit (make_vec's default mode)
             raise ValueError("max_episode_steps: a stori_jax vector env caps episodes in emulator "
                              "frames: pass max_episode_frames (steps x frame_skip), got "
                              f"max_episode_steps={make_kwargs['max_episode_steps']!r}")

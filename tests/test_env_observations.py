@@ -16,8 +16,8 @@ import stori_jax
 from stori_jax import Config, ObservationMask, get_game
 from stori_jax.env import emulator_seeds
 
-from _env_support import (binomial_ok, breakout_tracker, make, new_ale, random_actions, run_env,
-                          run_lockstep)
+from _env_support import (binomial_ok, breakout_tracker, lockstep_with_twin, make, new_ale,
+                          random_actions, run_env, run_lockstep)
 
 STEPS = 30
 BOXING_RING = (110, 156, 66)
@@ -148,16 +148,10 @@ def test_ram_obs_mode_leaves_the_game_alone_across_episode_ends(autoreset):
     """Spec 4.2: the rendered frame is not part of the game, across episode ends too: RAM,
     rewards, ends and lives equal the twin's through three truncations at 40 frames (the
     render must not count toward the frame cap, nor survive into the next episode)."""
-    kw = dict(obs="raw", max_episode_frames=40, autoreset=autoreset)
     actions = actions_of("Breakout", 33)
-    runs = []
-    for config in (Config(observation=ObservationMask("ram", 2, 1.0)), None):
-        env = make("Breakout", config, **kw)
-        try:
-            runs.append(run_env(env, actions))
-        finally:
-            env.close()
-    run, twin = runs
+    run, twin = lockstep_with_twin("Breakout", Config(observation=ObservationMask("ram", 2, 1.0)),
+                                   len(actions), lambda k, runs: actions[k], obs="raw",
+                                   max_episode_frames=40, autoreset=autoreset)
     assert_same_game(run, twin)
     assert run.stacked("truncated")[:, 0].sum() == 3
 
