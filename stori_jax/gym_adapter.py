@@ -42,10 +42,20 @@ def _numpy(x) -> np.ndarray:
     return np.array(x)
 
 
-def _numpy_info(info: dict) -> dict:
-    import jax
+def _vector_info(info: dict) -> dict:
+    """The batch's info as gymnasium's vector envs give it: numpy arrays, each key (nested
+    dicts' too) beside its ``_key`` mask of the envs that report it (here every env)."""
+    vector_info = {}
+    for key, value in info.items():
+        vector_info[key] = _vector_info(value) if isinstance(value, dict) else _numpy(value)
+        vector_info[f"_{key}"] = np.ones(len(_first_leaf(value)), dtype=np.bool_)
+    return vector_info
 
-    return jax.tree.map(_numpy, info)
+
+def _first_leaf(value):
+    while isinstance(value, dict):
+        value = next(iter(value.values()))
+    return value
 
 
 def _first_env_info(info: dict) -> dict:
@@ -103,14 +113,17 @@ class _Owner:
         self._fresh = True  # no reset yet: the env is exactly as made from self._seed
         self.closed = False
 
-    def _reset_env(self, seed):
-        """Reset the env: an explicit seed restarts everything (emulators and key) from that
-        seed, in the same worker processes; after a worker died, the env is made again."""
+    def _check_open(self):
         if self.closed:
             from stori_jax.backends.subproc import EnvClosedError
 
             raise EnvClosedError("this environment is closed; make a new one with "
                                  "gymnasium.make or gymnasium.make_vec")
+
+    def _reset_env(self, seed):
+        """Reset the env: an explicit seed restarts everything (emulators and key) from that
+        seed, in the same worker processes; after a worker died, the env is made again."""
+        self._check_open()
         if isinstance(seed, (list, tuple, np.ndarray)):
             raise ValueError(f"seed must be one int for all envs (env i's emulator seed derives "
                              f"from it and i); per-env seed lists are not supported, got {seed!r}")
@@ -167,6 +180,7 @@ class StoriGymEnv(_Owner, gym.Env):
         return _numpy(obs[0]), _first_env_info(info)
 
     def step(self, action):
+        self._check_open()
         a = np.asarray(action)
         if a.shape != () or not np.issubdtype(a.dtype, np.integer) or not 0 <= a < self.action_space.n:
             raise ValueError(f"action must be one int in [0, {self.action_space.n - 1}], "
@@ -194,12 +208,13 @@ class StoriVectorEnv(_Owner, VectorEnv):
         self._check_options(options)
         obs, info = self._reset_env(seed)
         super().reset(seed=self._gym_seed(seed))  # np_random(_seed), as gymnasium's vector envs
-        return _numpy(obs), _numpy_info(info)
+        return _numpy(obs), _vector_info(info)
 
     def step(self, actions):
+        self._check_open()
         obs, reward, terminated, truncated, info = self._env.step(actions)
         return (_numpy(obs), _numpy(reward), _numpy(terminated), _numpy(truncated),
-                _numpy_info(info))
+                _vector_info(info))
 
 
 def register_all() -> None:

@@ -214,12 +214,41 @@ def test_vector_env_close_seeding_and_writable_outputs():
     for seed in (None, 4):
         with pytest.raises(stori_jax.EnvClosedError):
             envs.reset(seed=seed)
+    with pytest.raises(stori_jax.EnvClosedError, match="gymnasium.make"):
+        envs.step(np.zeros(2, np.int64))  # named stori_jax.make, the wrong way back
     single = gym.make("stori_jax/Breakout-3.1-v0", obs="ram")
     obs, info = single.reset(seed=1)
     assert obs.flags.writeable and info["ram"].flags.writeable
     single.close()
     with pytest.raises(stori_jax.EnvClosedError):
         single.reset(seed=2)
+    with pytest.raises(stori_jax.EnvClosedError, match="gymnasium.make"):
+        single.step(0)
+
+
+def _info_layout(info):
+    """Each key's shape and dtype, nested dicts as dicts: what gymnasium code indexes."""
+    return {key: _info_layout(value) if isinstance(value, dict) else (value.shape, value.dtype)
+            for key, value in info.items()}
+
+
+def test_the_default_modes_infos_carry_gymnasiums_masks_as_the_sync_mode_does():
+    """Every info key, nested ones too, comes with its ``_key`` mask (all True: every env
+    reports every key), in the layout and dtypes gymnasium's own sync mode builds from
+    one-env infos. The default mode gave the keys without their masks."""
+    made = [gym.make_vec("stori_jax/Gopher-2.1-v0", num_envs=2, obs="ram", **mode)
+            for mode in ({}, {"vectorization_mode": "sync"})]
+    try:
+        for step in (False, True):
+            default, sync = (envs.step(np.array([1, 2]))[4] if step else envs.reset(seed=0)[1]
+                             for envs in made)
+            assert _info_layout(default) == _info_layout(sync)
+            assert default["_labels"].all() and default["labels"]["_score"].all()
+            assert all(default[key].all() for key in default if key.startswith("_"))
+            assert len(default) == 2 * len([key for key in default if not key.startswith("_")])
+    finally:
+        for envs in made:
+            envs.close()
 
 
 @pytest.mark.parametrize("vector", [False, True])
