@@ -17,6 +17,7 @@ import json
 import os
 import pickle
 import time
+import warnings
 from pathlib import Path
 from typing import NamedTuple
 
@@ -504,12 +505,35 @@ def _rows_upto(path: Path, fields, upto_step: int) -> list[list[str]]:
 
 # -- training -------------------------------------------------------------------------------------
 
+def _software_parts(ckpt: dict, start: int, made_with: dict, path: Path) -> list:
+    """The checkpoint's software history, with this part's software appended where it differs
+    from the last part's (a warning says so). A checkpoint written before the history was kept
+    starts it with unrecorded software (None)."""
+    parts = list(ckpt.get("software_parts", [dict(from_iteration=0, software=None)]))
+    before = parts[-1]["software"]
+    if before == made_with:
+        return parts
+    if before is not None:
+        changed = [f"{name} {before.get(name)!r} -> {made_with[name]!r}"
+                   for name in ("python", "machine", "commit")
+                   if before.get(name) != made_with[name]]
+        changed += [f"{name} {version!r} -> {made_with['packages'][name]!r}"
+                    for name, version in before.get("packages", {}).items()
+                    if version != made_with["packages"].get(name)]
+        warnings.warn(f"--resume: {path} was trained so far with other software ("
+                      + "; ".join(changed) + "): from iteration " + str(start) + " on, the run "
+                      "will not match an uninterrupted one bit for bit", stacklevel=3)
+    return parts + [dict(from_iteration=start, software=made_with)]
+
+
 def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool = True,
           stop_after: int | None = None) -> dict:
     """Train PPO; write ``out``/config.json, log.csv, episodes.csv, checkpoint.pkl and
     summary.json.  ``resume`` continues from ``out``/checkpoint.pkl.  ``stop_after`` stops
     (with a checkpoint) after that many iterations in total, as an interruption would.  The
-    summary records the software this call started with (a resumed run: its last part's)."""
+    summary's ``software`` is what this call started with; ``software_parts`` lists the
+    software of every part of a resumed run where it changed (resuming with other software
+    warns: the run no longer matches an uninterrupted one bit for bit)."""
     from tqdm import tqdm
 
     made_with = software()  # before training, not whatever is installed when it ends
@@ -536,6 +560,7 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
                                  "continue")
             params, opt_state = ckpt["params"], ckpt["opt_state"]
             key, start, obs = ckpt["key"], ckpt["iteration"], list(ckpt["obs"])
+            software_parts = _software_parts(ckpt, start, made_with, ckpt_path)
             for env, snap in zip(envs, ckpt["envs"]):
                 env.restore(snap)
             step = start * config.batch_size
@@ -549,6 +574,7 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
             params = network.init(init_key, obs[0])
             opt_state = optimizer.init(params)
             start, elapsed = 0, 0.0
+            software_parts = [dict(from_iteration=0, software=made_with)]
             (out / "config.json").write_text(json.dumps(dataclasses.asdict(config), indent=1))
             _rewrite_csv(log_path, LOG_FIELDS, [])
             _rewrite_csv(ep_path, EPISODE_FIELDS, [])
@@ -592,7 +618,8 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
                 save_checkpoint(ckpt_path, dict(
                     format="stori-jax-ppo-1", config=dataclasses.asdict(config),
                     iteration=iteration + 1, params=params, opt_state=opt_state, key=key,
-                    obs=obs, envs=[env.snapshot() for env in envs], elapsed_s=elapsed))
+                    obs=obs, envs=[env.snapshot() for env in envs], elapsed_s=elapsed,
+                    software_parts=software_parts))
         bar.close()
     finally:
         for env in envs:
@@ -600,7 +627,8 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
     summary = dict(config=dataclasses.asdict(config), iterations_done=last,
                    finished=last == config.num_iterations,
                    agent_steps=last * config.batch_size, train_seconds=elapsed,
-                   train_sps=last * config.batch_size / max(elapsed, 1e-9), software=made_with)
+                   train_sps=last * config.batch_size / max(elapsed, 1e-9), software=made_with,
+                   software_parts=software_parts)
     if summary["finished"]:
         (out / "summary.json").write_text(json.dumps(summary, indent=1))
     return dict(summary, iterations_now=last - start)  # 0: a resumed run had finished

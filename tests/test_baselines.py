@@ -7,6 +7,7 @@ import csv
 import dataclasses
 import json
 import pickle
+import warnings
 
 import ale_py
 import jax
@@ -231,6 +232,33 @@ def test_resume_reproduces_the_uninterrupted_run(uninterrupted, tmp_path):
     a, b = read_checkpoint(full), read_checkpoint(tmp_path)
     assert_trees_equal((a["params"], a["opt_state"], a["key"], a["obs"]),
                        (b["params"], b["opt_state"], b["key"], b["obs"]))
+
+
+def test_a_resumed_run_records_each_parts_software_and_warns_when_it_changed(
+        uninterrupted, tmp_path, monkeypatch):
+    """A resumed run's summary named only its last part's software; a part trained with other
+    software (another jax, another commit) went unnoticed."""
+    full, summary = uninterrupted
+    assert summary["software_parts"] == [dict(from_iteration=0, software=summary["software"])]
+    ppo.train(tiny(), tmp_path, progress=False, stop_after=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the same software: no warning
+        ppo.train(tiny(), tmp_path, progress=False, stop_after=2, resume=True)
+    first = provenance.software()
+    later = dict(first, commit="0" * 40, packages=dict(first["packages"], jax="9.9"))
+    monkeypatch.setattr(ppo, "software", lambda: later)
+    with pytest.warns(UserWarning, match=r"other software \(commit \S+ -> '0{40}'; "
+                      r"jax '[^']+' -> '9\.9'\): from iteration 2 on"):
+        ppo.train(tiny(), tmp_path, progress=False, resume=True)
+    recorded = json.loads((tmp_path / "summary.json").read_text())
+    assert recorded["software"] == later
+    assert recorded["software_parts"] == [dict(from_iteration=0, software=first),
+                                          dict(from_iteration=2, software=later)]
+    # a checkpoint from before the history was kept: its parts' software is unrecorded
+    ckpt = read_checkpoint(full)
+    del ckpt["software_parts"]
+    assert ppo._software_parts(ckpt, 3, later, full / "checkpoint.pkl") == [
+        dict(from_iteration=0, software=None), dict(from_iteration=3, software=later)]
 
 
 def test_resuming_a_finished_run_says_there_is_nothing_to_train(uninterrupted, capsys):
