@@ -23,7 +23,8 @@ def add_parsers(sub) -> None:
     train.add_argument("--resume", action="store_true",
                        help="continue from the run directory's checkpoint.pkl")
     train.add_argument("--set", dest="overrides", action="append", default=[],
-                       metavar="FIELD=VALUE", help="any PPO hyperparameter but game, preset, seed and steps (their own "
+                       metavar="FIELD=VALUE",
+                       help="any PPO hyperparameter but game, preset, seed and steps (their own "
                             "flags), e.g. network=nips")
     train.add_argument("--eval-episodes", type=int, default=0,
                        help="evaluate the final policy for this many episodes (default 0: "
