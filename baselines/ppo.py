@@ -520,9 +520,9 @@ def _software_parts(ckpt: dict, start: int, made_with: dict, path: Path) -> list
         changed += [f"{name} {version!r} -> {made_with['packages'][name]!r}"
                     for name, version in before.get("packages", {}).items()
                     if version != made_with["packages"].get(name)]
-        warnings.warn(f"--resume: {path} was trained so far with other software ("
-                      + "; ".join(changed) + "): from iteration " + str(start) + " on, the run "
-                      "will not match an uninterrupted one bit for bit", stacklevel=3)
+        warnings.warn(f"--resume: {path} was trained so far with other software "
+                      f"({'; '.join(changed)}): from iteration {start} on, the run will not "
+                      "match an uninterrupted one bit for bit", stacklevel=3)
     return parts + [dict(from_iteration=start, software=made_with)]
 
 

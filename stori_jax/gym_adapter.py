@@ -42,20 +42,15 @@ def _numpy(x) -> np.ndarray:
     return np.array(x)
 
 
-def _vector_info(info: dict) -> dict:
+def _vector_info(info: dict, num_envs: int) -> dict:
     """The batch's info as gymnasium's vector envs give it: numpy arrays, each key (nested
     dicts' too) beside its ``_key`` mask of the envs that report it (here every env)."""
     vector_info = {}
     for key, value in info.items():
-        vector_info[key] = _vector_info(value) if isinstance(value, dict) else _numpy(value)
-        vector_info[f"_{key}"] = np.ones(len(_first_leaf(value)), dtype=np.bool_)
+        vector_info[key] = (_vector_info(value, num_envs) if isinstance(value, dict)
+                            else _numpy(value))
+        vector_info[f"_{key}"] = np.ones(num_envs, dtype=np.bool_)
     return vector_info
-
-
-def _first_leaf(value):
-    while isinstance(value, dict):
-        value = next(iter(value.values()))
-    return value
 
 
 def _first_env_info(info: dict) -> dict:
@@ -208,13 +203,13 @@ class StoriVectorEnv(_Owner, VectorEnv):
         self._check_options(options)
         obs, info = self._reset_env(seed)
         super().reset(seed=self._gym_seed(seed))  # np_random(_seed), as gymnasium's vector envs
-        return _numpy(obs), _vector_info(info)
+        return _numpy(obs), _vector_info(info, self.num_envs)
 
     def step(self, actions):
         self._check_open()
         obs, reward, terminated, truncated, info = self._env.step(actions)
         return (_numpy(obs), _numpy(reward), _numpy(terminated), _numpy(truncated),
-                _vector_info(info))
+                _vector_info(info, self.num_envs))
 
 
 def register_all() -> None:
