@@ -240,6 +240,99 @@ def test_boxing_hit_cancel_nets_exactly_zero(granularity):
         np.testing.assert_array_equal(ev.ram[:k + 1, b], twin.ram[:k + 1, b])
 
 
+def boxing_score_difference(ram):
+    """player score - enemy score (BCD bytes 18, 19), what Boxing's reward counts."""
+    from stori_jax.games import boxing
+
+    ram = np.asarray(ram, np.int32)
+    return boxing.LABELS["player_score"](ram) - boxing.LABELS["enemy_score"](ram)
+
+
+def test_boxing_hit_cancel_keeps_the_other_frames_rewards_of_its_step():
+    """Mode 2 at p = 0.5 per frame, 30 frames a step: a cancel zeroes its own frame's reward
+    only, so every step's reward is the step's change of (player - enemy score), including
+    steps where one hit was cancelled and another kept."""
+    actions = random_actions(18, 150, 4, seed=0)
+    env = make("Boxing", event(2, 0.5), num_envs=4, frame_skip=30)
+    try:
+        run = run_env(env, actions)
+    finally:
+        env.close()
+    assert not run.done.any()  # 4500 frames: the bout (2 minutes) is not over
+    reward, fired = run.stacked("reward"), run.stacked("event_fired")
+    np.testing.assert_array_equal(reward, np.diff(boxing_score_difference(run.ram), axis=0))
+    assert ((fired > 0) & (reward != 0)).sum() >= 3, "no step with a cancel and a kept hit"
+
+
+def test_boxing_hit_cancel_state_starts_afresh_with_each_episode():
+    """The rule compares each frame's scores with the previous frame's: at a new episode that
+    is the new episode's start, not the ended one's last RAM (whose scores, written back as
+    'cancelled' changes, leaked into the new bout); and a cancel on an episode's last frame
+    leaves no pending correction for the next episode."""
+    # p = 0.5, episodes of 600 frames: the first step of each new episode starts at 0 : 0
+    env = make("Boxing", event(2, 0.5), num_envs=8, num_workers=2, max_episode_frames=600)
+    try:
+        run = run_env(env, random_actions(18, 160, 8, seed=0))
+    finally:
+        env.close()
+    ended = run.ram[:-1][run.done]  # the RAM a step before each end (the end's is the reset's)
+    assert run.done[:-1].sum() == 8 and (boxing_score_difference(ended) != 0).any()
+    first = np.roll(run.done, 1, axis=0)  # a new episode's first step (after the autoreset)
+    np.testing.assert_array_equal(run.ram[1:][first][:, 18:20], 0)
+    assert not run.stacked("reward")[first].any() and not run.stacked("event_fired")[first].any()
+    # p = 1, the episode cut off at the frame of the twin's first hit: that hit is cancelled
+    # on the episode's last frame, and the next episode gets no correction for it
+    actions = random_actions(18, 300, 1, seed=3)
+    twin_env = make("Boxing", num_envs=1, frame_skip=1)
+    try:
+        hit = first_step(run_env(twin_env, actions).stacked("reward")[:, 0] != 0)
+    finally:
+        twin_env.close()
+    assert hit is not None and hit > 10
+    env = make("Boxing", event(2, 1.0), num_envs=1, frame_skip=1, max_episode_frames=hit + 1)
+    try:
+        run = run_env(env, actions[:hit + 40])
+    finally:
+        env.close()
+    assert run.stacked("truncated")[hit, 0] and run.stacked("event_fired")[hit, 0]
+    assert not run.stacked("reward").any()
+
+
+def test_a_step_cut_short_by_the_episode_end_still_applies_its_event():
+    """At step granularity the event rule runs after the step's last frame, or after the
+    frame where the episode ended: a step of 2 frames cut off by the frame cap (42 frames, 4 a
+    step) still switches the city, as every other step does at p = 1."""
+    config = event(3, 1.0, granularity="step")
+    env = make("BankHeist", config, num_envs=1, max_episode_frames=42, autoreset=False)
+    try:
+        run = run_env(env, np.full((11, 1), NOOP, np.int32))
+    finally:
+        env.close()
+    assert run.stacked("truncated")[:, 0].tolist() == [False] * 10 + [True]
+    np.testing.assert_array_equal(run.stacked("event_fired"), 1)
+    city = run.ram[:, 0, 0].astype(int)
+    assert (city[1:] % 4 != city[:-1] % 4).all()
+
+
+def test_bankheist_city_switch_picks_each_other_maze_a_third_of_the_time():
+    """Mode 3 at p = 0.02 per frame: where a switch fires, the new maze is one of the three
+    others, uniformly, drawn independently of the firing draw (the draw that fired is below
+    p, so reusing it would always pick the same maze)."""
+    env = make("BankHeist", event(3, 0.02), num_envs=4, num_workers=2, frame_skip=1)
+    try:
+        run = run_env(env, np.full((700, 4), NOOP, np.int32))
+    finally:
+        env.close()
+    fired = run.stacked("event_fired") > 0
+    maze = run.ram[:, :, 0].astype(int) % 4
+    offset = (maze[1:] - maze[:-1]) % 4
+    assert not offset[~fired].any()  # NOOP keeps the robber in its city
+    offsets = offset[fired]
+    assert offsets.size >= 30 and set(offsets) <= {1, 2, 3}
+    for other in (1, 2, 3):
+        assert binomial_ok((offsets == other).sum(), offsets.size, 1 / 3), np.bincount(offsets)
+
+
 def test_boxing_displace_moves_boxers_to_each_others_start_corner():
     """Mode 3 at p = 1, per frame, frame_skip 1, NOOP: before every frame the player is put at
     the enemy's start corner and the enemy at the player's.  (The game re-initialises the
@@ -480,11 +573,12 @@ def test_bankheist_city_switch_keeps_the_level():
 @pytest.mark.slow
 def test_bankheist_empty_bank_zeroes_the_robbery_reward():
     """Mode 4 at p = 1: the game is the twin's (nothing written), but the reward of the frame in
-    which a bank is robbed (a slot of 24..26 leaves 253) is 0."""
-    steps = 400
-    actions = random_actions(18, steps, 4, seed=0)
+    which a bank is robbed (a slot of 24..26 leaves 253) is 0.  One frame a step (each action
+    held for 4), so a step's reward is its frame's: only that frame's reward is zeroed."""
+    steps = 1600
+    actions = np.repeat(random_actions(18, steps // 4, 4, seed=0), 4, axis=0)
     ev, twin = lockstep_with_twin("BankHeist", event(4, 1.0), steps, lambda k, runs: actions[k],
-                                  num_envs=4, num_workers=2)
+                                  num_envs=4, num_workers=2, frame_skip=1)
     np.testing.assert_array_equal(ev.ram, twin.ram)
     slots = twin.ram[:, :, 24:27]
     robbed = ((slots[:-1] == 253) & (slots[1:] != 253)).any(-1) & ~twin.done

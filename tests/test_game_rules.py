@@ -558,13 +558,17 @@ def test_bankheist_bank_was_empty():
 
 
 def test_bankheist_labels():
-    ram = make_ram({0: 6, 8: 80, 28: 70, 12: 1, 15: 2, 51: 3, 24: 253, 25: 254, 26: 255,
-                    52: 4, 53: 5, 54: 6, 85: 3, 86: 9, 69: 46, 66: 7, 68: 8}).astype(np.int32)
+    """Every label reads the spec's address (section 8): each byte holds a value of its own
+    (address + 101), so a label that reads a neighbour's byte shows (direction read 16, the
+    background colour 66, and the test did not see it)."""
+    ram = (np.arange(128) + 101).astype(np.int32)
     got = {k: int(f(ram)) for k, f in bankheist.LABELS.items()}
-    assert got["city"] == 2 and got["robber_y"] == 80 and got["robber_x"] == 70
-    assert got["bomb"] == 1 and got["fuel"] == 9 and got["lives"] == 3
-    assert [got[f"slot_{k}"] for k in range(3)] == [253, 254, 255]
-    assert [got[f"police_orientation_{k}"] for k in range(3)] == [4, 5, 6]
+    spec = {"city_count": 0, "robber_y": 8, "robber_x": 28, "bomb": 12, "direction": 15,
+            "orientation": 51, "slot_0": 24, "slot_1": 25, "slot_2": 26,
+            "police_orientation_0": 52, "police_orientation_1": 53, "police_orientation_2": 54,
+            "lives": 85, "fuel": 86, "background_colour": 69, "city_blocks_66": 66,
+            "city_blocks_68": 68}
+    assert got == {"city": 101 % 4, **{k: address + 101 for k, address in spec.items()}}
 
 
 # ---------------------------------------------------------------------------------------------
