@@ -130,3 +130,33 @@ def test_a_reset_step_reports_no_drawn_action_and_concept_1():
     assert not run.stacked("executed_action")[6].any()
     for info in (run.reset_info, run.info[6]):
         assert not info["concept"].any() and not info["action_corrupted"].any()
+
+
+def test_episode_statistics_and_frame_stack_restart_at_each_autoreset():
+    """Boxing, episodes cut at 200 frames (50 steps), three of them under random play with
+    atari84 observations: at each end, episode_return is the sum of that episode's rewards
+    alone and episode_length its 50 steps (the totals restart at an autoreset, not only at
+    reset()); the observation returned is the next episode's first, its stack one frame four
+    times (the frame stack restarts too, not only at reset())."""
+    steps = 150
+    env = make("Boxing", obs="atari84", max_episode_frames=200)
+    try:
+        run = run_env(env, random_actions(env.num_actions, steps, 2, seed=0))
+    finally:
+        env.close()
+    reward, done, obs = run.stacked("reward"), run.done, run.stacked("obs")
+    returns, lengths = run.stacked("episode_return"), run.stacked("episode_length")
+    ends = np.arange(steps) % 50 == 49
+    np.testing.assert_array_equal(done, ends[:, None].repeat(2, 1))
+    np.testing.assert_array_equal(lengths, np.where(done, 50, 0))
+    for k in np.nonzero(ends)[0]:
+        np.testing.assert_array_equal(returns[k], reward[k - 49:k + 1].sum(0), err_msg=f"step {k}")
+        for b in range(2):
+            frames = obs[k, b]
+            assert all((frames[..., i] == frames[..., 0]).all() for i in range(4)), (k, b)
+    assert not returns[~done].any()
+    # engaged: an episode before the last scored, so a return carried over would show; the
+    # stack mid-episode holds different frames, so a stack carried over would show
+    assert returns[ends][:-1].any()
+    assert all(not (obs[k, b][..., 0] == obs[k, b][..., 3]).all() for b in range(2)
+               for k in np.nonzero(ends)[0][:-1] - 1)

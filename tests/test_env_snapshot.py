@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import jax
 import numpy as np
 import pytest
 
 import stori_jax
 from stori_jax import Config, RandomEvent
+
+from _env_support import breakout_tracker, to_numpy
 
 
 def play(env, steps: int, seed: int) -> list:
@@ -130,3 +133,43 @@ def test_envpool_backend_cannot_snapshot():
         env.reset()
         with pytest.raises(ValueError, match="backend='subproc'"):
             env.snapshot()
+
+
+def track(env, ram, steps: int):
+    """Step ``env`` ``steps`` times under the ball-tracking policy, starting from RAM ``ram``:
+    (per step a dict of obs, reward, terminated, truncated and info as numpy, the last RAM)."""
+    record = []
+    for _ in range(steps):
+        out = to_numpy(env.step(breakout_tracker(ram)))
+        record.append(dict(zip(("obs", "reward", "terminated", "truncated", "info"), out)))
+        ram = record[-1]["info"]["ram"]
+    return record, ram
+
+
+def test_restored_env_continues_a_block_hit_cancel_exactly():
+    """Breakout's block-hit cancel (event mode 1, p = 0.5) compares each frame's blocks with the
+    previous frame's RAM: a restored env must take that RAM from the snapshot.  Left at the
+    fresh env's own first RAM (every block standing), the blocks hit before the snapshot look
+    hit anew on the first frame after it, and the cancel rebuilds them."""
+    config = Config(event=RandomEvent(1, 0.5))
+    kw = dict(config=config, num_envs=2, num_workers=1, inline_envs=1)
+    with stori_jax.make("Breakout", seed=5, **kw) as env:
+        _, info = env.reset()
+        before, ram = track(env, np.asarray(info["ram"]), 150)
+        snap = env.snapshot()
+        expected, _ = track(env, ram, 60)
+    with stori_jax.make("Breakout", seed=77, **kw) as env:
+        _, info = env.reset()
+        fresh_ram = np.asarray(info["ram"])
+        env.restore(snap)
+        got, _ = track(env, ram, 60)
+    # engaged: blocks were hit before the snapshot (so the previous RAM the rule reads differs
+    # from a fresh episode's in the bytes it compares), and the event fires after it
+    assert sum(step["reward"].sum() for step in before) > 0
+    assert (ram[:, :36] != fresh_ram[:, :36]).any(axis=1).all()
+    assert sum(step["info"]["event_fired"].sum() for step in expected) > 0
+    for step, (a, b) in enumerate(zip(expected, got)):  # obs, reward, ends and every info key
+        (paths, xs), ys = zip(*jax.tree_util.tree_flatten_with_path(a)[0]), jax.tree.leaves(b)
+        assert len(xs) == len(ys)
+        for path, x, y in zip(paths, xs, ys):
+            np.testing.assert_array_equal(y, x, f"step {step} {jax.tree_util.keystr(path)}")
