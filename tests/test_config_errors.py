@@ -473,3 +473,12 @@ def test_a_drift_period_beyond_int32_is_refused_at_construction():
         ConceptDrift("sudden", 2**31, Config(action_noise=ActionNoise(0.1)))
     assert ConceptDrift("sudden", 2**31 - 1, Config(action_noise=ActionNoise(0.1))).period \
         == 2**31 - 1
+
+
+def test_reference_bad_event_probability_names_its_own_key():
+    """A 2.1 config's bad probability is named by the key the user wrote (the event's), not
+    the action-corruption key the loader shares code with."""
+    key = f"{IS}.action_independent_random.random_stochasticity_prob"
+    with pytest.raises(ValueError, match=re.escape(f"reference config '{key}': RandomEvent.prob")):
+        Config.from_reference({"stochasticity_type": "2.1",
+                               f"{IS}.action_independent_random.mode": "1", key: 1.5})

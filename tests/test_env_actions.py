@@ -7,8 +7,9 @@ from __future__ import annotations
 import numpy as np
 
 from stori_jax import ActionNoise, Config
+from stori_jax.env import emulator_seeds
 
-from _env_support import binomial_ok, make, random_actions, run_env, to_numpy
+from _env_support import binomial_ok, make, new_ale, random_actions, run_env, to_numpy
 
 
 def noise(prob, granularity="frame", **kw):
@@ -135,3 +136,26 @@ def test_sticky_actions_start_every_episode_from_noop():
     np.testing.assert_array_equal(flat[sticky], previous[sticky])
     # not vacuous: some episodes start sticky where the episode before ended on another action
     assert (sticky[:, starts[1:]] & (last_of_episode_before != 0)).sum() >= 2
+
+
+def test_a_steps_per_frame_actions_reach_the_emulator_in_frame_order():
+    """Frame granularity: ``info['executed_action'][b, f]`` is what frame f of the step ran. A
+    bare emulator of the same seed fed those actions frame by frame has the env's RAM after
+    every step (the rate tests above could not see the frames played in another order)."""
+    env = make("Boxing", noise(0.5), num_envs=1, num_workers=0)
+    ale = new_ale("boxing", emulator_seeds(0, 1)[0])
+    minimal = ale.getMinimalActionSet()
+    ale.reset_game()
+    mixed = 0
+    try:
+        env.reset()
+        for k, actions in enumerate(random_actions(18, 15, 1, seed=0)):
+            obs, *_, info = to_numpy(env.step(actions))
+            executed = info["executed_action"][0]
+            mixed += len(set(executed.tolist())) > 1
+            for action in executed:
+                ale.act(minimal[int(action)])
+            np.testing.assert_array_equal(obs[0], ale.getRAM(), err_msg=f"step {k}")
+    finally:
+        env.close()
+    assert mixed >= 5  # steps whose frames ran different actions: the order matters there

@@ -160,3 +160,20 @@ def test_episode_statistics_and_frame_stack_restart_at_each_autoreset():
     assert returns[ends][:-1].any()
     assert all(not (obs[k, b][..., 0] == obs[k, b][..., 3]).all() for b in range(2)
                for k in np.nonzero(ends)[0][:-1] - 1)
+
+
+def test_reset_clears_the_reset_a_finished_episode_left_pending():
+    """Without autoreset, an ended episode's next step would reset it; a reset() in between
+    does that, so the step after it is a real step that plays the agent's action (it was
+    taken for the pending reset step and the action dropped)."""
+    env = make("Breakout", num_envs=1, num_workers=0, autoreset=False, max_episode_frames=8,
+               granularity="step")
+    try:
+        env.reset()
+        env.step(np.zeros(1, np.int32))
+        assert env.step(np.zeros(1, np.int32))[3][0]  # truncated: a reset is pending
+        env.reset()
+        *_, info = env.step(np.ones(1, np.int32))
+        assert not info["reset_step"][0] and int(info["executed_action"][0]) == 1
+    finally:
+        env.close()

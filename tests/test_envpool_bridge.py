@@ -203,3 +203,32 @@ def test_consecutive_seeds_share_no_emulator_stream():
     a, b = reset_rams(0), reset_rams(1)
     assert not any(np.array_equal(a[i + 1], b[i]) for i in range(3))
     np.testing.assert_array_equal(reset_rams(0), a)  # still the same run for the same seed
+
+
+def test_envpool_rewards_are_the_games_own_score_unclipped():
+    """The bridge turns envpool's Atari reward clipping off: Gopher's rewards over 300 random
+    steps add up to its score's gain (a filled hole is worth 20; clipped it would be 1)."""
+    from stori_jax.games.gopher import score
+
+    with stori_jax.make("Gopher", num_envs=2, seed=0, obs="ram", **EP) as env:
+        _, info = env.reset()
+        start = score(np.asarray(info["ram"]).astype(int))
+        rng, total = np.random.default_rng(0), np.zeros(2)
+        for _ in range(300):
+            _, reward, terminated, truncated, info = env.step(rng.integers(0, 8, 2))
+            assert not (np.asarray(terminated) | np.asarray(truncated)).any()
+            total += np.asarray(reward)
+    np.testing.assert_array_equal(total, score(np.asarray(info["ram"]).astype(int)) - start)
+    assert total.max() >= 20
+
+
+def test_an_envpool_episode_is_the_whole_game_not_one_life():
+    """The bridge turns envpool's episodic life off: Breakout under FIRE alone (the paddle
+    never moves) terminates when the last life is lost, not the first."""
+    with stori_jax.make("Breakout", num_envs=1, seed=0, obs="ram", **EP) as env:
+        env.reset()
+        for _ in range(1000):
+            _, _, terminated, truncated, info = env.step(np.ones(1, np.int32))
+            if terminated[0] or truncated[0]:
+                break
+    assert terminated[0] and int(info["lives"][0]) == 0

@@ -177,3 +177,15 @@ def test_the_metrics_module_is_an_attribute_of_the_package():
     code = "import stori_jax; print(stori_jax.metrics.action_channel_capacity(4, 0.0))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert float(out.stdout) == pytest.approx(2.0)
+
+
+def test_exact_values_of_the_action_information_and_the_state_variance():
+    """Exact values where the estimators' terms differ: a constant intended (or executed)
+    action carries no information, whatever the other side does (the symmetric uniform inputs
+    above could not tell H(A) from H(Ã)); next_state_variance is the variance over the batch
+    summed over D, not a standard deviation."""
+    assert empirical_action_information([0, 0, 0, 0], [0, 1, 2, 3], 4) == pytest.approx(0.0)
+    assert empirical_action_information([0, 1, 2, 3], [0, 0, 0, 0], 4) == pytest.approx(0.0)
+    assert empirical_action_information([0, 1, 2, 3], [0, 1, 2, 3], 4) == pytest.approx(2.0)
+    states = np.array([[[0.0, 1.0], [4.0, 1.0]], [[1.0, 0.0], [3.0, 6.0]]])  # (T=2, B=2, D=2)
+    np.testing.assert_allclose(next_state_variance(states), [4.0, 1.0 + 9.0])
