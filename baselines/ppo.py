@@ -256,13 +256,22 @@ def make_network(config: PPOConfig, num_actions: int) -> ActorCritic:
                        action_head=config.action_head)
 
 
+def learning_rate_schedule(config: PPOConfig) -> optax.Schedule:
+    """The learning rate of each minibatch update (counted from 0 over the whole run): annealed
+    linearly to 0 at the run's last update with `anneal_lr`, constant without."""
+    if not config.anneal_lr:
+        return optax.constant_schedule(config.learning_rate)
+    return optax.linear_schedule(config.learning_rate, 0.0,
+                                 config.num_iterations * updates_per_iteration(config))
+
+
+def updates_per_iteration(config: PPOConfig) -> int:
+    return config.update_epochs * config.num_minibatches
+
+
 def make_optimizer(config: PPOConfig) -> optax.GradientTransformation:
-    updates_per_iteration = config.update_epochs * config.num_minibatches
-    lr = (optax.linear_schedule(config.learning_rate, 0.0,
-                                config.num_iterations * updates_per_iteration)
-          if config.anneal_lr else config.learning_rate)
     return optax.chain(optax.clip_by_global_norm(config.max_grad_norm),
-                       optax.adam(lr, eps=1e-5))
+                       optax.adam(learning_rate_schedule(config), eps=1e-5))
 
 
 def act(network: ActorCritic, params, obs, key):
@@ -543,7 +552,7 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
     envs = make_envs(config)
     try:
         network = make_network(config, envs[0].num_actions)
-        optimizer = make_optimizer(config)
+        optimizer, schedule = make_optimizer(config), learning_rate_schedule(config)
         act_fn = jax.jit(lambda p, o, k: act(network, p, o, k))
         update = make_update(network, optimizer, config)
         if resume:
@@ -601,8 +610,8 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
             step = step0 + config.batch_size
             returns = [e[2] for e in episodes]
             recent = (recent + returns)[-20:]
-            lr = (config.learning_rate * (1 - (iteration + 1) / config.num_iterations)
-                  if config.anneal_lr else config.learning_rate)
+            # the rate the next update will use (this iteration's updates ran above it)
+            lr = float(schedule((iteration + 1) * updates_per_iteration(config)))
             row = dict(iteration=iteration + 1, global_step=step, episodes=len(returns),
                        mean_return=np.mean(returns) if returns else "",
                        mean_length=np.mean([e[3] for e in episodes]) if episodes else "",

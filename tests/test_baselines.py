@@ -221,6 +221,21 @@ def test_training_writes_its_files(uninterrupted):
     assert json.loads((out / "config.json").read_text())["network"] == "tiny"
 
 
+def test_the_logged_learning_rate_is_the_optimizers(uninterrupted):
+    """`lr` is the rate the optimizer's next update uses: its schedule at its update count."""
+    out, _ = uninterrupted
+    config = tiny()
+    counted = lambda x: "count" in getattr(x, "_fields", ())  # optax's schedule states
+    states = jax.tree.leaves(read_checkpoint(out)["opt_state"], is_leaf=counted)
+    assert {int(s.count) for s in states if counted(s)} == {
+        3 * config.update_epochs * config.num_minibatches}, "one count per minibatch update"
+    logged = [float(r["lr"]) for r in read_log(out)]
+    np.testing.assert_allclose(logged, [config.learning_rate * (1 - i / 3) for i in (1, 2, 3)],
+                               rtol=1e-6, atol=1e-12)
+    constant = ppo.learning_rate_schedule(tiny(anneal_lr=False))
+    assert float(constant(10**6)) == pytest.approx(config.learning_rate)
+
+
 def test_resume_reproduces_the_uninterrupted_run(uninterrupted, tmp_path):
     full, _ = uninterrupted
     partial = ppo.train(tiny(), tmp_path, progress=False, stop_after=1)
