@@ -256,11 +256,12 @@ def make_network(config: PPOConfig, num_actions: int) -> ActorCritic:
                        action_head=config.action_head)
 
 
-def learning_rate_schedule(config: PPOConfig) -> optax.Schedule:
+def learning_rate_schedule(config: PPOConfig) -> optax.ScalarOrSchedule:
     """The learning rate of each minibatch update (counted from 0 over the whole run): annealed
-    linearly to 0 at the run's last update with `anneal_lr`, constant without."""
+    linearly to 0 at the run's last update with `anneal_lr`, a constant float without (so the
+    optimizer state has no schedule count, as in checkpoints made before this function)."""
     if not config.anneal_lr:
-        return optax.constant_schedule(config.learning_rate)
+        return config.learning_rate
     return optax.linear_schedule(config.learning_rate, 0.0,
                                  config.num_iterations * updates_per_iteration(config))
 
@@ -611,7 +612,8 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
             returns = [e[2] for e in episodes]
             recent = (recent + returns)[-20:]
             # the rate the next update will use (this iteration's updates ran above it)
-            lr = float(schedule((iteration + 1) * updates_per_iteration(config)))
+            lr = float(schedule((iteration + 1) * updates_per_iteration(config))
+                       if callable(schedule) else schedule)
             row = dict(iteration=iteration + 1, global_step=step, episodes=len(returns),
                        mean_return=np.mean(returns) if returns else "",
                        mean_length=np.mean([e[3] for e in episodes]) if episodes else "",
