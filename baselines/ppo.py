@@ -266,6 +266,12 @@ def learning_rate_schedule(config: PPOConfig) -> optax.ScalarOrSchedule:
                                  config.num_iterations * updates_per_iteration(config))
 
 
+def learning_rate_at(config: PPOConfig, update_count: int) -> float:
+    """The rate the optimizer uses for its update number `update_count` (as the log shows it)."""
+    schedule = learning_rate_schedule(config)
+    return float(schedule(update_count) if callable(schedule) else schedule)
+
+
 def updates_per_iteration(config: PPOConfig) -> int:
     return config.update_epochs * config.num_minibatches
 
@@ -553,7 +559,7 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
     envs = make_envs(config)
     try:
         network = make_network(config, envs[0].num_actions)
-        optimizer, schedule = make_optimizer(config), learning_rate_schedule(config)
+        optimizer = make_optimizer(config)
         act_fn = jax.jit(lambda p, o, k: act(network, p, o, k))
         update = make_update(network, optimizer, config)
         if resume:
@@ -612,8 +618,7 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
             returns = [e[2] for e in episodes]
             recent = (recent + returns)[-20:]
             # the rate the next update will use (this iteration's updates ran above it)
-            lr = float(schedule((iteration + 1) * updates_per_iteration(config))
-                       if callable(schedule) else schedule)
+            lr = learning_rate_at(config, (iteration + 1) * updates_per_iteration(config))
             row = dict(iteration=iteration + 1, global_step=step, episodes=len(returns),
                        mean_return=np.mean(returns) if returns else "",
                        mean_length=np.mean([e[3] for e in episodes]) if episodes else "",

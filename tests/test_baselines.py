@@ -233,6 +233,7 @@ def test_the_logged_learning_rate_is_the_optimizers(uninterrupted):
     np.testing.assert_allclose(logged, [config.learning_rate * (1 - i / 3) for i in (1, 2, 3)],
                                rtol=1e-6, atol=1e-12)
     assert ppo.learning_rate_schedule(tiny(anneal_lr=False)) == config.learning_rate
+    assert ppo.learning_rate_at(tiny(anneal_lr=False), 7) == config.learning_rate
 
 
 def test_resume_reproduces_the_uninterrupted_run(uninterrupted, tmp_path):
