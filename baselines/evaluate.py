@@ -54,10 +54,15 @@ def check_eval_seed(train_seed: int, eval_seed: int, advice: str) -> None:
                          f"the evaluation would replay training's episodes; {advice}")
 
 
-def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: int = 0,
-             eval_seed: int | None = None, num_envs: int = EVAL_NUM_ENVS, checkpoint: Path | None = None,
+def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100,
+             seed: int | None = None, eval_seed: int | None = None,
+             num_envs: int = EVAL_NUM_ENVS, checkpoint: Path | None = None,
              max_episode_frames: int = 108_000, progress: bool = True) -> dict:
-    """Play ``episodes`` episodes; returns a dict with every return and their mean and std."""
+    """Play ``episodes`` episodes; returns a dict with every return and their mean and std.
+
+    ``seed`` is the training seed the result is filed under (the table's seed column): a
+    checkpoint's own (another is refused), 0 for the random policy unless given. ``eval_seed``
+    defaults to that seed + EVAL_SEED_OFFSET."""
     import jax
     import stori_jax
     from stori_jax.provenance import software
@@ -72,7 +77,6 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
     episodes, num_envs = check_int("episodes", episodes, 1), check_int("num_envs", num_envs, 1)
     game = stori_game(game)  # one spelling per game (and preset) in the results
     preset = canonical_preset(game, preset)
-    eval_seed = seed + EVAL_SEED_OFFSET if eval_seed is None else eval_seed
     num_envs = min(num_envs, episodes)
     if checkpoint is not None:
         from baselines.ppo import load_policy
@@ -81,11 +85,19 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100, seed: 
         if (config.game, config.preset) != (game, preset):
             raise ValueError(f"checkpoint {checkpoint} was trained on {config.game} "
                              f"{config.preset}, not {game} {preset}")
-        check_eval_seed(config.seed, eval_seed, "choose another --eval-seed (by default "
+        if seed is not None and seed != config.seed:
+            raise ValueError(f"seed {seed} differs from the training seed {config.seed} of "
+                             f"checkpoint {checkpoint} (to evaluate on other seeds, give "
+                             "eval_seed)")
+        seed = config.seed
+        eval_seed = seed + EVAL_SEED_OFFSET if eval_seed is None else eval_seed
+        check_eval_seed(seed, eval_seed, "choose another --eval-seed (by default "
                         f"the training seed + {EVAL_SEED_OFFSET})")
     else:
         from stori_jax.suite import random_policy
 
+        seed = 0 if seed is None else seed
+        eval_seed = seed + EVAL_SEED_OFFSET if eval_seed is None else eval_seed
         choose = random_policy(stori_jax.get_game(game).num_actions)
 
     quotas = episode_quotas(episodes, num_envs)

@@ -553,6 +553,8 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
     from tqdm import tqdm
 
     made_with = software()  # before training, not whatever is installed when it ends
+    if stop_after is not None:
+        check_int("stop_after", stop_after, 1)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     ckpt_path, log_path, ep_path = out / "checkpoint.pkl", out / "log.csv", out / "episodes.csv"
@@ -576,6 +578,9 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
                                  "continue")
             params, opt_state = ckpt["params"], ckpt["opt_state"]
             key, start, obs = ckpt["key"], ckpt["iteration"], list(ckpt["obs"])
+            if stop_after is not None and stop_after < start:
+                raise ValueError(f"stop_after {stop_after} is before {ckpt_path}'s iteration "
+                                 f"{start}: a run cannot go back")
             software_parts = _software_parts(ckpt, start, made_with, ckpt_path)
             for env, snap in zip(envs, ckpt["envs"]):
                 env.restore(snap)

@@ -7,6 +7,7 @@ import csv
 import dataclasses
 import json
 import pickle
+import shutil
 import warnings
 
 import ale_py
@@ -181,6 +182,156 @@ def test_gae_by_hand():
     np.testing.assert_allclose(ret, adv + rollout.value)
 
 
+def reference_gae(reward, value, done, last_value, gamma, lam):
+    """GAE as its definition reads: A_t = sum_l (gamma lam)^l delta_{t+l}, the sum and the
+    bootstrap stopping at the end of the episode (done[t]: it ended after step t)."""
+    steps, envs = reward.shape
+    values = np.concatenate([value, last_value[None]])  # V(s_T): the bootstrap value
+    delta = reward + gamma * values[1:] * (1 - done) - value
+    advantages = np.zeros_like(reward)
+    for b in range(envs):
+        for t in range(steps):
+            for l in range(steps - t):
+                advantages[t, b] += (gamma * lam) ** l * delta[t + l, b]
+                if done[t + l, b]:
+                    break
+    return advantages, advantages + value
+
+
+def test_gae_is_the_discounted_sum_of_td_errors_cut_at_episode_ends():
+    """A hand-made batch with episodes ending mid-rollout, on consecutive steps and on the last
+    step: no advantage may flow back across an episode's end (only the bootstrap was checked)."""
+    rng = np.random.default_rng(0)
+    reward = rng.normal(size=(7, 3))
+    value = rng.normal(size=(7, 3))
+    done = np.zeros((7, 3), bool)
+    done[2, 0] = done[3, 0] = True          # two episodes end on consecutive steps
+    done[4, 1] = True                       # one ends mid-rollout
+    done[6, 2] = True                       # one ends on the last step: no bootstrap
+    last_value = np.array([5.0, -3.0, 11.0])
+    rollout = ppo.Rollout(obs=None, action=None, logp=None, value=jnp.asarray(value, jnp.float32),
+                          reward=jnp.asarray(reward, jnp.float32), done=jnp.asarray(done))
+    adv, ret = ppo.gae(rollout, jnp.asarray(last_value, jnp.float32), gamma=0.9, lam=0.8)
+    expected_adv, expected_ret = reference_gae(reward, value, done, last_value, 0.9, 0.8)
+    np.testing.assert_allclose(adv, expected_adv, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(ret, expected_ret, rtol=1e-5, atol=1e-5)
+
+
+class TableNetwork:
+    """A stand-in for the network: its parameters are a table of logits and values, one row per
+    sample, and its 'frames' are the samples' indices into it."""
+
+    @staticmethod
+    def apply(params, obs):
+        return params["logits"][obs], params["value"][obs]
+
+
+def reference_ppo_loss(logits, value, batch, clip, ent_coef, vf_coef, clip_vloss):
+    """CleanRL's ppo_atari loss, in float64 numpy: normalised advantages, the clipped
+    surrogate, the (clipped) value loss, the entropy bonus, and the logged KL and clip fraction."""
+    _, action, old_logp, old_value, advantage, target = (np.asarray(x, np.float64) for x in batch)
+    log_probs = logits - np.log(np.exp(logits).sum(axis=1, keepdims=True))
+    log_ratio = log_probs[np.arange(len(action)), action.astype(int)] - old_logp
+    ratio = np.exp(log_ratio)
+    adv = (advantage - advantage.mean()) / (advantage.std() + 1e-8)
+    pg_loss = np.maximum(-adv * ratio, -adv * np.clip(ratio, 1 - clip, 1 + clip)).mean()
+    if clip_vloss:
+        clipped = old_value + np.clip(value - old_value, -clip, clip)
+        v_loss = 0.5 * np.maximum((value - target) ** 2, (clipped - target) ** 2).mean()
+    else:
+        v_loss = 0.5 * ((value - target) ** 2).mean()
+    entropy = -(np.exp(log_probs) * log_probs).sum(axis=1).mean()
+    return pg_loss - ent_coef * entropy + vf_coef * v_loss, dict(
+        pg_loss=pg_loss, v_loss=v_loss, entropy=entropy,
+        approx_kl=((ratio - 1) - log_ratio).mean(),
+        clipfrac=(np.abs(ratio - 1) > clip).mean())
+
+
+@pytest.mark.parametrize("clip_vloss", [True, False])
+def test_the_ppo_loss_is_cleanrls_on_a_hand_made_batch(clip_vloss):
+    """The loss checked against a numpy reference, on a batch whose ratios and values lie on
+    both sides of the clip range and whose advantages are far from normalised (the loss-lowering
+    test passes with the clipping reversed, the entropy bonus's sign flipped or the advantage
+    normalisation removed)."""
+    rng = np.random.default_rng(1)
+    n, num_actions = 24, 4
+    logits = rng.normal(size=(n, num_actions))
+    action = rng.integers(0, num_actions, n)
+    log_probs = logits - np.log(np.exp(logits).sum(axis=1, keepdims=True))
+    old_logp = log_probs[np.arange(n), action] - np.linspace(-0.45, 0.45, n)  # ratios 0.64..1.57
+    value = rng.normal(size=n)
+    old_value = value + rng.uniform(-0.6, 0.6, n)  # half of them beyond the clip range
+    advantage = 3.0 + 2.0 * rng.normal(size=n)
+    target = value + rng.normal(size=n)
+    batch = tuple(jnp.asarray(x, dtype) for x, dtype in (
+        (np.arange(n), jnp.int32), (action, jnp.int32), (old_logp, jnp.float32),
+        (old_value, jnp.float32), (advantage, jnp.float32), (target, jnp.float32)))
+    config = tiny(clip_coef=0.2, ent_coef=0.05, vf_coef=0.7, clip_vloss=clip_vloss)
+    params = dict(logits=jnp.asarray(logits, jnp.float32), value=jnp.asarray(value, jnp.float32))
+    loss, metrics = ppo.ppo_loss(TableNetwork(), config, params, batch)
+    expected_loss, expected = reference_ppo_loss(logits, value, batch, 0.2, 0.05, 0.7, clip_vloss)
+    assert 0.2 < expected["clipfrac"] < 0.8, "the batch has ratios on both sides of the clip"
+    np.testing.assert_allclose(float(loss), expected_loss, rtol=1e-5, atol=1e-6)
+    for name, value in expected.items():
+        np.testing.assert_allclose(float(metrics[name]), value, rtol=1e-5, atol=1e-6,
+                                   err_msg=name)
+
+
+def test_act_samples_from_the_policy_and_returns_the_sampled_actions_log_probs():
+    logits = 3 * jax.random.normal(jax.random.PRNGKey(0), (64, 4))
+    params = dict(logits=logits, value=jnp.arange(64.0))
+    action, logp, value = ppo.act(TableNetwork(), params, jnp.arange(64), jax.random.PRNGKey(2))
+    np.testing.assert_array_equal(action, jax.random.categorical(jax.random.PRNGKey(2), logits))
+    log_probs = np.asarray(jax.nn.log_softmax(logits))
+    np.testing.assert_allclose(logp, log_probs[np.arange(64), np.asarray(action)], rtol=1e-6)
+    np.testing.assert_array_equal(value, np.arange(64.0))
+    assert len(set(np.asarray(action).tolist())) == 4, "the draws are not one action"
+
+
+def test_each_epoch_visits_every_sample_once_in_minibatches_of_a_fresh_order(monkeypatch):
+    config = tiny(update_epochs=3, num_minibatches=4)
+    t, b = config.num_steps, config.num_envs
+    ids = jnp.arange(config.batch_size).reshape(t, b)  # each sample's frames: its index
+    rollout = ppo.Rollout(obs=ids, action=jnp.zeros((t, b), jnp.int32), logp=jnp.zeros((t, b)),
+                          value=jnp.zeros((t, b)), reward=jnp.ones((t, b)),
+                          done=jnp.zeros((t, b), bool))
+    params = dict(logits=jnp.zeros((config.batch_size, 4)), value=jnp.zeros(config.batch_size))
+    seen = []
+    loss = ppo.ppo_loss
+
+    def spy(network, config, params, batch):
+        jax.debug.callback(lambda i: seen.append(np.asarray(i)), batch[0], ordered=True)
+        return loss(network, config, params, batch)
+
+    monkeypatch.setattr(ppo, "ppo_loss", spy)
+    optimizer = ppo.make_optimizer(config)
+    update = ppo.make_update(TableNetwork(), optimizer, config)
+    jax.block_until_ready(update(params, optimizer.init(params), rollout, ids[-1],
+                                 jax.random.PRNGKey(1)))
+    jax.effects_barrier()
+    assert [len(batch) for batch in seen] == [config.minibatch_size] * 12
+    epochs = [np.concatenate(seen[e * 4:(e + 1) * 4]) for e in range(3)]
+    for order in epochs:
+        assert sorted(order) == list(range(config.batch_size)), "every sample once an epoch"
+    assert len({tuple(order) for order in epochs}) == 3, "each epoch shuffles anew"
+    assert list(epochs[0]) != list(range(config.batch_size))
+
+
+def test_gradients_are_clipped_to_max_grad_norm_before_adam():
+    """Adam alone is nearly scale-free, so only its eps (1e-5, CleanRL's) shows the clipping:
+    a gradient clipped to norm 1e-9 moves the parameters about 1e-4 as far as an unclipped
+    one."""
+    grads = {"w": jnp.array([3.0, -4.0])}
+    params = {"w": jnp.zeros(2)}
+    for max_grad_norm, norm in ((10.0, 5.0), (1e-9, 1e-9)):
+        optimizer = ppo.make_optimizer(tiny(max_grad_norm=max_grad_norm, anneal_lr=False,
+                                            learning_rate=0.1))
+        updates, _ = optimizer.update(grads, optimizer.init(params), params)
+        g = np.array([3.0, -4.0]) * norm / 5.0  # the gradient clipped to norm max_grad_norm
+        # Adam's first step: -lr * m_hat / (sqrt(v_hat) + eps), with m_hat = g, v_hat = g ** 2
+        np.testing.assert_allclose(updates["w"], -0.1 * g / (np.abs(g) + 1e-5), rtol=1e-4)
+
+
 # -- training runs: determinism and resume ----------------------------------------------------
 
 def read_log(path):
@@ -305,6 +456,13 @@ def test_resume_refuses_another_config(uninterrupted, tmp_path):
         ppo.train(tiny(total_steps=64, ent_coef=0.5), tmp_path, resume=True, progress=False)
     with pytest.raises(ValueError, match="does not exist"):
         ppo.train(tiny(), tmp_path / "nothing", resume=True, progress=False)
+    shutil.copytree(full, tmp_path / "at-3")
+    with pytest.raises(ValueError, match=r"stop_after 2 is before .*checkpoint.pkl's iteration "
+                                         "3: a run cannot go back"):
+        ppo.train(tiny(), tmp_path / "at-3", resume=True, progress=False, stop_after=2)
+    assert read_log(tmp_path / "at-3") == read_log(full)
+    with pytest.raises(ValueError, match="stop_after must be >= 1, got 0"):
+        ppo.train(tiny(), tmp_path / "other", progress=False, stop_after=0)
 
 
 @pytest.mark.parametrize("kw,match", [
@@ -327,6 +485,150 @@ def test_overrides_are_typed():
     assert (config.learning_rate, config.anneal_lr, config.num_envs) == (1e-3, False, 8)
     with pytest.raises(ValueError, match="num_envs must be an int"):
         ppo.PPOConfig.from_overrides(tiny(), {"num_envs": "eight"})
+
+
+class ScriptedHalf:
+    """A stand-in for one half-batch of stori-jax envs (send/recv, snapshot/restore) playing a
+    script: global env e gets reward 3 (e + 1) when (t + e) % 3 == 0 and -2 when (t + e) % 5 == 0
+    on its t-th step, and its episode terminates when (t + e) % 7 == 0 or is truncated when
+    (t + 2 e) % 11 == 0.  Frames carry t and e; the actions sent are kept."""
+
+    num_actions = 4
+
+    def __init__(self, num_envs: int, first: int):
+        self.num_envs, self.ids = num_envs, first + np.arange(num_envs)
+        self.t, self.returns, self.lengths = 0, np.zeros(num_envs), np.zeros(num_envs, int)
+        self.sent = []
+
+    def frames(self):
+        obs = np.zeros((self.num_envs, 84, 84, 4), np.uint8)
+        obs[:, 0, 0, 0], obs[:, 0, 0, 1] = self.t % 256, self.ids
+        return obs
+
+    def reset(self):
+        return self.frames(), {}
+
+    def send(self, actions):
+        self.sent.append(np.asarray(actions))
+
+    def recv(self):
+        self.t += 1
+        t, e = self.t, self.ids
+        reward = np.where((t + e) % 3 == 0, 3.0 * (e + 1), np.where((t + e) % 5 == 0, -2.0, 0.0))
+        terminated, truncated = (t + e) % 7 == 0, (t + 2 * e) % 11 == 0
+        done = terminated | truncated
+        self.returns, self.lengths = self.returns + reward, self.lengths + 1
+        info = dict(episode_return=np.where(done, self.returns, 0.0),
+                    episode_length=np.where(done, self.lengths, 0))
+        self.returns = np.where(done, 0.0, self.returns)
+        self.lengths = np.where(done, 0, self.lengths)
+        return self.frames(), reward.astype(np.float32), terminated, truncated, info
+
+    def snapshot(self):
+        return dict(t=self.t, returns=self.returns.copy(), lengths=self.lengths.copy())
+
+    def restore(self, snapshot):
+        self.t, self.returns, self.lengths = (snapshot[k] for k in ("t", "returns", "lengths"))
+
+    def close(self):
+        pass
+
+
+def scripted_episodes(num_envs: int, steps: int):
+    """Every episode the script ends in ``steps`` steps of all envs: (global_step, env, return,
+    length), global_step counting the agent steps of all envs, as episodes.csv does."""
+    halves = [ScriptedHalf(num_envs // 2, 0), ScriptedHalf(num_envs // 2, num_envs // 2)]
+    episodes = []
+    for t in range(1, steps + 1):
+        for half in halves:
+            _, _, terminated, truncated, info = half.recv()
+            for i in np.flatnonzero(terminated | truncated):
+                episodes.append((t * num_envs, int(half.ids[i]), float(info["episode_return"][i]),
+                                 int(info["episode_length"][i])))
+    return sorted(episodes)
+
+
+def test_a_rollout_records_each_step_of_both_halves_with_sign_clipped_rewards():
+    """What collect() stores per step and env: the frames the action was chosen on, that
+    action, the reward clipped to its sign, done = terminated or truncated, env e in column e,
+    and every finished episode with its global step and env; every action with a key of its
+    own."""
+    halves = [ScriptedHalf(3, 0), ScriptedHalf(3, 3)]
+    keys = []
+
+    def act_fn(params, obs, key):
+        keys.append(np.asarray(key))
+        frames = np.asarray(obs)[:, 0, 0]
+        action = (frames[:, 0].astype(int) + frames[:, 1]) % 4
+        return (jnp.asarray(action, jnp.int32), jnp.asarray(frames[:, 1], jnp.float32),
+                jnp.asarray(frames[:, 0], jnp.float32))
+
+    episodes = []
+    obs = [half.reset()[0] for half in halves]
+    rollout, obs, key = ppo.collect(halves, act_fn, None, obs, jax.random.PRNGKey(0), 5,
+                                    episodes, step0=600)
+    t, e = np.arange(5)[:, None], np.arange(6)[None, :]
+    frames = np.asarray(rollout.obs)[:, :, 0, 0]
+    np.testing.assert_array_equal(frames[..., 0], np.broadcast_to(t, (5, 6)))  # before the step
+    np.testing.assert_array_equal(frames[..., 1], np.broadcast_to(e, (5, 6)))
+    np.testing.assert_array_equal(rollout.action, (t + e) % 4)
+    np.testing.assert_array_equal(np.concatenate([np.stack(h.sent) for h in halves], axis=1),
+                                  (t + e) % 4)
+    np.testing.assert_array_equal(rollout.logp, np.broadcast_to(e, (5, 6)))
+    raw = np.where((t + 1 + e) % 3 == 0, 3.0 * (e + 1), np.where((t + 1 + e) % 5 == 0, -2.0, 0.0))
+    np.testing.assert_array_equal(rollout.reward, np.sign(raw))
+    assert np.abs(raw).max() > 1, "rewards beyond +-1 are there to be clipped"
+    terminated, truncated = (t + 1 + e) % 7 == 0, (t + 1 + 2 * e) % 11 == 0
+    assert terminated.any() and truncated.any()
+    np.testing.assert_array_equal(rollout.done, terminated | truncated)
+    assert sorted(episodes) == [(600 + s, env, r, n) for s, env, r, n in scripted_episodes(6, 5)]
+    assert np.asarray(obs[1])[0, 0, 0, 0] == 5
+    assert len(keys) == 10 and len({k.tobytes() for k in keys}) == 10, "a key per action"
+    assert not any(np.array_equal(np.asarray(key), k) for k in keys)
+
+
+def scripted_clock():
+    """perf_counter for train(): the n-th call reads n ** 2 seconds, so that every iteration
+    takes its own time (t0, t1, t2 of iteration k: (3k)^2, (3k + 1)^2, (3k + 2)^2)."""
+    calls = iter(range(10**6))
+    return lambda: float(next(calls)) ** 2
+
+
+def test_the_log_counts_this_iterations_episodes_and_measures_speed_over_the_whole_run(
+        tmp_path, monkeypatch):
+    """log.csv on scripted envs and a scripted clock: each row's episodes, mean return and mean
+    length are those of the episodes.csv rows of its iteration; sps is the run's agent steps
+    over its whole training time (carried over a resume), rollout_sps this iteration's
+    rollout, update_s its update; checkpoints every checkpoint_every iterations and at the
+    end."""
+    config = tiny(total_steps=5 * 64, checkpoint_every=2)
+    monkeypatch.setattr(ppo, "make_envs", lambda c: [ScriptedHalf(2, 0), ScriptedHalf(2, 2)])
+    monkeypatch.setattr(ppo, "time", type("Clock", (), dict(perf_counter=scripted_clock())))
+    saved, save = [], ppo.save_checkpoint
+    monkeypatch.setattr(ppo, "save_checkpoint",
+                        lambda path, payload: (saved.append(payload["iteration"]),
+                                               save(path, payload)))
+    ppo.train(config, tmp_path, progress=False, stop_after=3)
+    summary = ppo.train(config, tmp_path, progress=False, resume=True)
+    assert saved == [2, 3, 4, 5]
+    with open(tmp_path / "episodes.csv", newline="") as f:
+        episodes = [(int(r["global_step"]), int(r["env"]), float(r["return"]), int(r["length"]))
+                    for r in csv.DictReader(f)]
+    assert sorted(episodes) == scripted_episodes(4, 5 * 16)
+    with open(tmp_path / "log.csv", newline="") as f:
+        log = list(csv.DictReader(f))
+    k = np.arange(5)
+    iteration_s = (3 * k + 2) ** 2 - (3 * k) ** 2
+    for i, row in enumerate(log):
+        mine = [e for e in episodes if 64 * i < e[0] <= 64 * (i + 1)]
+        assert int(row["episodes"]) == len(mine) > 0
+        assert float(row["mean_return"]) == pytest.approx(np.mean([e[2] for e in mine]))
+        assert float(row["mean_length"]) == pytest.approx(np.mean([e[3] for e in mine]))
+        assert float(row["sps"]) == pytest.approx(64 * (i + 1) / iteration_s[:i + 1].sum())
+        assert float(row["rollout_sps"]) == pytest.approx(64 / ((3 * i + 1) ** 2 - (3 * i) ** 2))
+        assert float(row["update_s"]) == pytest.approx((3 * i + 2) ** 2 - (3 * i + 1) ** 2)
+    assert summary["train_seconds"] == pytest.approx(iteration_s.sum())
+    assert summary["train_sps"] == pytest.approx(5 * 64 / iteration_s.sum())
 
 
 # -- evaluation -------------------------------------------------------------------------------
@@ -362,6 +664,127 @@ def test_checkpoint_evaluation(uninterrupted, policy):
                                              r"envs' seeds .* choose another --eval-seed"):
             evaluate("Breakout", "1", policy=policy, episodes=1, eval_seed=eval_seed,
                      checkpoint=full / "checkpoint.pkl", progress=False)
+
+
+def test_a_checkpoints_evaluation_is_filed_under_its_training_seed(uninterrupted, tmp_path):
+    """Without `seed`, a checkpoint's result carries its own training seed (and the evaluation
+    seeds follow from it); another seed is refused, as `eval --seed` refuses it."""
+    full, _ = uninterrupted
+    payload = read_checkpoint(full)
+    payload["config"] = dict(payload["config"], seed=7)
+    ppo.save_checkpoint(tmp_path / "checkpoint.pkl", payload)
+    kw = dict(policy="greedy", episodes=1, num_envs=1, checkpoint=tmp_path / "checkpoint.pkl",
+              max_episode_frames=40, progress=False)
+    result = evaluate("Breakout", "1", **kw)
+    assert (result["train_seed"], result["eval_seed"]) == (7, 10_007)
+    assert evaluate("Breakout", "1", seed=7, **kw)["eval_seed"] == 10_007
+    with pytest.raises(ValueError, match=r"seed 0 differs from the training seed 7 of "
+                                         r"checkpoint .* give eval_seed"):
+        evaluate("Breakout", "1", seed=0, **kw)
+
+
+class ScriptedEvalEnv:
+    """A stand-in for ``stori_jax.make``'s env in an evaluation: env i's episodes last 2 + 3 i
+    steps and its k-th returns 10 i + k; env 1's second episode is cut off at the frame cap
+    (truncated), env 2's first ends on the very step that reaches it (both)."""
+
+    def __init__(self, game, preset, *, num_envs, seed, obs, max_episode_frames):
+        self.made = dict(game=game, preset=preset, num_envs=num_envs, seed=seed, obs=obs,
+                         max_episode_frames=max_episode_frames)
+        self.num_envs, self.steps = num_envs, np.zeros(num_envs, int)
+        self.episode = np.zeros(num_envs, int)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        pass
+
+    def reset(self):
+        return np.zeros((self.num_envs, 84, 84, 4), np.uint8), {}
+
+    def step(self, actions):
+        assert np.asarray(actions).shape == (self.num_envs,)
+        i = np.arange(self.num_envs)
+        self.steps += 1
+        done = self.steps == 2 + 3 * i
+        truncated = done & (((i == 1) & (self.episode == 1)) | ((i == 2) & (self.episode == 0)))
+        terminated = done & ~((i == 1) & (self.episode == 1))
+        info = dict(episode_return=np.where(done, 10.0 * i + self.episode, 0.0),
+                    episode_length=np.where(done, self.steps, 0))
+        self.episode, self.steps = self.episode + done, np.where(done, 0, self.steps)
+        return self.reset()[0], np.zeros(self.num_envs), terminated, truncated, info
+
+
+def test_evaluation_plays_each_envs_first_episodes_and_reports_their_mean_and_std(monkeypatch):
+    """On scripted envs: env i plays its first quota[i] episodes (not the first episodes to
+    end, which favours short ones), std_return is the std over the episodes with ddof = 0, an
+    episode counts as cut off only when the cap ended it, the env is made on the evaluation
+    seed (training seed + 10000), and the policy acts with keys from agent_key(eval seed)."""
+    made, keys = [], []
+
+    def make(*args, **kwargs):
+        made.append(ScriptedEvalEnv(*args, **kwargs))
+        return made[-1]
+
+    def random_policy(num_actions):
+        assert num_actions == 4
+
+        def policy(obs, key):
+            keys.append(np.asarray(key))
+            return np.zeros(obs.shape[0], np.int32)
+        return policy
+
+    monkeypatch.setattr(stori_jax, "make", make)
+    monkeypatch.setattr("stori_jax.suite.random_policy", random_policy)
+    result = evaluate("Breakout", "2.1", policy="random", episodes=7, num_envs=3, seed=5,
+                      max_episode_frames=1234, progress=False)
+    assert made[0].made == dict(game="Breakout", preset="2.1", num_envs=3, seed=10_005,
+                                obs="atari84", max_episode_frames=1234)
+    assert list(episode_quotas(7, 3)) == [3, 2, 2]
+    assert result["returns"] == [0.0, 1.0, 2.0, 10.0, 11.0, 20.0, 21.0]
+    assert result["lengths"] == [2, 2, 2, 5, 5, 8, 8]
+    returns = np.array(result["returns"])
+    assert result["mean_return"] == pytest.approx(returns.sum() / 7)
+    assert result["std_return"] == pytest.approx(
+        np.sqrt(((returns - returns.mean()) ** 2).sum() / 7))  # ddof = 0
+    assert result["truncated"] == 1
+    assert (result["eval_seed"], result["train_seed"], result["agent_steps"]) == (10_005, 5, 48)
+    key = stori_jax.agent_key(10_005)
+    for used in keys:
+        key, k = jax.random.split(key)
+        np.testing.assert_array_equal(used, k)
+    assert len(keys) == 16
+
+
+def test_the_random_baseline_policy_is_uniform_over_the_games_actions():
+    from stori_jax.suite import random_policy
+
+    for num_actions in (4, 18):
+        policy = random_policy(num_actions)
+        obs = jnp.zeros((20_000, 1), jnp.uint8)
+        counts = np.bincount(np.asarray(policy(obs, jax.random.PRNGKey(0))),
+                             minlength=num_actions)
+        assert len(counts) == num_actions
+        expected = 20_000 / num_actions
+        # chi-square with num_actions - 1 degrees of freedom, far below any p < 1e-6 bound
+        assert ((counts - expected) ** 2 / expected).sum() < 3 * num_actions + 30, counts
+
+
+def test_greedy_acts_by_the_argmax_and_sampled_draws_from_the_policy(uninterrupted):
+    full, _ = uninterrupted
+    config, greedy = ppo.load_policy(full / "checkpoint.pkl", "greedy")
+    _, sampled = ppo.load_policy(full / "checkpoint.pkl", "sampled")
+    network = ppo.make_network(config, 4)
+    params = ppo.load_checkpoint(full / "checkpoint.pkl")["params"]
+    obs = jax.random.randint(jax.random.PRNGKey(0), (16, 84, 84, 4), 0, 256).astype(jnp.uint8)
+    logits, _ = network.apply(params, obs)
+    draws = []
+    for key in jax.random.split(jax.random.PRNGKey(1), 8):
+        np.testing.assert_array_equal(greedy(obs, key), np.argmax(logits, axis=-1))
+        draws.append(np.asarray(sampled(obs, key)))
+        np.testing.assert_array_equal(draws[-1], jax.random.categorical(key, logits))
+    assert len({d.tobytes() for d in draws}) > 1, "sampled actions depend on the key"
 
 
 # -- the table --------------------------------------------------------------------------------
@@ -544,6 +967,58 @@ def test_curves_stop_where_a_run_stopped_and_the_table_names_what_it_leaves_out(
     assert line[0] == 1.0 and line[1] == 2.0 and np.isnan(line[2])
 
 
+PAPER_LAYOUT = [("Breakout", p) for p in ("1", "2.1", "2.2", "3.1", "3.2A", "3.2B", "3.2C")] + [
+    ("Boxing", p) for p in ("1", "2.1", "2.2", "3.1", "3.2A", "3.2B", "3.2C")] + [
+    (game, p) for game in ("Gopher", "BankHeist") for p in ("1", "2.1", "2.2", "3.1", "3.2")]
+
+
+def test_the_table_rows_follow_the_papers_layout(tmp_path):
+    """STORI_SPEC section 11's row order: Breakout, Boxing, Gopher, BankHeist, each from type 1
+    to 3.2, whatever order the evaluations are found in."""
+    for i, (game, preset) in enumerate(reversed(PAPER_LAYOUT)):
+        fake_eval(tmp_path / f"{i:02d}", game, preset, "ppo", 0, float(i))
+    rows = aggregate(load_evaluations(tmp_path))
+    assert [(r["game"], r["preset"]) for r in rows] == PAPER_LAYOUT
+    assert [line.split(" | ")[:2] for line in markdown(rows).splitlines()[2:]] == [
+        [f"| {game}", preset] for game, preset in PAPER_LAYOUT]
+
+
+def test_the_curves_show_each_seed_their_mean_and_the_random_policys_mean(tmp_path,
+                                                                         monkeypatch):
+    """One panel per preset in the paper's order; in each, every seed's smoothed curve, their
+    mean, and the random policy's evaluation mean (over its seeds) as a dashed line."""
+    import matplotlib.pyplot as plt
+
+    from baselines.table import plot_curves
+
+    for preset, seed, returns in (("3.1", 0, (1.0, 3.0)), ("3.1", 7, (5.0, 7.0)),
+                                  ("1", 0, (2.0, 2.0))):
+        run = tmp_path / f"Breakout-{preset}" / f"ppo-seed{seed}"
+        run.mkdir(parents=True)
+        (run / "config.json").write_text(json.dumps(dict(game="Breakout", preset=preset,
+                                                         seed=seed)))
+        (run / "episodes.csv").write_text("global_step,env,return,length\n" + "".join(
+            f"{100 * (k + 1)},0,{r},5\n" for k, r in enumerate(returns)))
+    for seed, mean in ((0, 1.0), (7, 4.0)):
+        fake_eval(tmp_path, "Breakout", "3.1", "random", seed, mean)
+    figures, close = [], plt.close
+    monkeypatch.setattr(plt, "close", figures.append)  # keep the figure to look at
+    evaluations = load_evaluations(tmp_path)
+    paths = plot_curves(learning_curves(tmp_path), evaluations, tmp_path / "out", window=20)
+    assert [p.name for p in paths] == ["curves-Breakout.png"] and len(figures) == 1
+    panels = figures[0].axes
+    assert [ax.get_title() for ax in panels] == ["Breakout 1", "Breakout 3.1"]
+    lines = {line.get_label(): np.asarray(line.get_ydata(), float) for line in panels[1].lines}
+    assert set(lines) == {"seed 0", "seed 7", "mean over seeds", "random policy (eval)"}
+    np.testing.assert_allclose(lines["mean over seeds"], (lines["seed 0"] + lines["seed 7"]) / 2)
+    assert np.nanmax(lines["mean over seeds"]) == 4.0  # the latest episodes' mean, (2 + 6) / 2
+    np.testing.assert_array_equal(lines["random policy (eval)"], [2.5, 2.5])
+    dashed = [line for line in panels[1].lines if line.get_label() == "random policy (eval)"]
+    assert dashed[0].get_linestyle() == "--"
+    assert "random policy (eval)" not in [line.get_label() for line in panels[0].lines]
+    close(figures[0])
+
+
 # -- the command line -------------------------------------------------------------------------
 
 @pytest.mark.parametrize("argv,match", [
@@ -555,6 +1030,10 @@ def test_curves_stop_where_a_run_stopped_and_the_table_names_what_it_leaves_out(
     (["train", "ppo", "--game", "Breakout", "--set", "nope=1"],
      "unknown PPO hyperparameter 'nope'; --set takes ['action_head', "),
     (["train", "ppo", "--game", "Breakout", "--set", "seed=3"], "--seed"),
+    (["train", "ppo", "--game", "Breakout", "--set", "total_steps=64"],
+     "set total_steps with --steps, not --set"),
+    (["train", "ppo", "--game", "Breakout", "--set", "preset=1"],
+     "set preset with --preset, not --set"),
     (["train", "ppo", "--game", "Breakout", "--steps", "0"], "--steps must be >= 1"),
     (["eval"], "--checkpoint PATH or --random"),
     (["eval", "--random", "--game", "Breakout"], "--game and --preset"),
@@ -660,3 +1139,65 @@ def test_suite_plays_a_checkpoint_on_its_games_presets(uninterrupted, tmp_path, 
     assert main(["suite", "--checkpoint", str(checkpoint), "--games", "Boxing", "--quiet",
                  "--no-gallery", "--out", str(tmp_path)]) == 2
     assert "plays Breakout only" in capsys.readouterr().err
+
+
+def test_cli_eval_passes_its_seeds_envs_and_default_policy_on(uninterrupted, tmp_path):
+    """--seed files the random policy's result under that training seed, --eval-seed and
+    --num-envs reach the evaluation, and a checkpoint acts `sampled` unless told otherwise."""
+    assert main(["eval", "--random", "--game", "Breakout", "--preset", "3.1", "--seed", "3",
+                 "--eval-seed", "123", "--num-envs", "2", "--episodes", "3",
+                 "--max-episode-frames", "40", "--out", str(tmp_path / "random"),
+                 "--quiet"]) == 0
+    result = json.loads((tmp_path / "random" / "eval-random.json").read_text())
+    assert (result["train_seed"], result["eval_seed"], result["num_envs"], result["episodes"],
+            len(result["returns"])) == (3, 123, 2, 3, 3)
+    full, _ = uninterrupted
+    assert main(["eval", "--checkpoint", str(full / "checkpoint.pkl"), "--episodes", "1",
+                 "--num-envs", "1", "--max-episode-frames", "40", "--out",
+                 str(tmp_path / "ppo"), "--quiet"]) == 0
+    assert [p.name for p in (tmp_path / "ppo").iterdir()] == ["eval-sampled.json"]
+    result = json.loads((tmp_path / "ppo" / "eval-sampled.json").read_text())
+    assert (result["policy"], result["eval_seed"], result["train_seed"]) == ("sampled", 10_000, 0)
+
+
+def test_cli_eval_says_a_greedy_policy_on_a_preset_without_randomness_plays_one_episode(
+        uninterrupted, tmp_path, capsys):
+    full, _ = uninterrupted
+    payload = read_checkpoint(full)
+    payload["config"] = dict(payload["config"], preset="3.1")  # the same network plays 3.1
+    ppo.save_checkpoint(tmp_path / "3.1" / "checkpoint.pkl", payload)
+    for checkpoint, noted in ((full / "checkpoint.pkl", False),
+                              (tmp_path / "3.1" / "checkpoint.pkl", True)):
+        assert main(["eval", "--checkpoint", str(checkpoint), "--policy", "greedy",
+                     "--episodes", "1", "--num-envs", "1", "--max-episode-frames", "40",
+                     "--out", str(tmp_path / str(noted)), "--quiet"]) == 0
+        out = capsys.readouterr().out
+        assert ("has no randomness once the policy is greedy" in out) == noted, out
+
+
+def test_cli_train_evaluates_the_sampled_policy_of_its_checkpoint(tmp_path, monkeypatch,
+                                                                    capsys):
+    """--eval-episodes N: after training, N episodes of the run's checkpoint acting `sampled`
+    on its preset, filed under its training seed (the default evaluation seeds)."""
+    import baselines.evaluate
+
+    calls = []
+
+    def train(config, out, resume, progress):
+        return dict(iterations_now=1, agent_steps=config.total_steps, train_seconds=1.0,
+                    train_sps=1.0)
+
+    def evaluate(game, preset, **kwargs):
+        calls.append(dict(kwargs, game=game, preset=preset))
+        return dict(game=game, preset=preset, agent="ppo", policy=kwargs["policy"],
+                    mean_return=1.0, truncated=0, episodes=kwargs["episodes"])
+
+    monkeypatch.setattr(ppo, "train", train)
+    monkeypatch.setattr(baselines.evaluate, "evaluate", evaluate)
+    assert main(["train", "ppo", "--game", "boxing", "--preset", "3.2b", "--seed", "4",
+                 "--steps", "64", "--eval-episodes", "3", "--out", str(tmp_path),
+                 "--quiet"]) == 0
+    assert calls == [dict(game="Boxing", preset="3.2B", policy="sampled", seed=4, episodes=3,
+                          checkpoint=tmp_path / "checkpoint.pkl", progress=False)]
+    assert json.loads((tmp_path / "eval-sampled.json").read_text())["policy"] == "sampled"
+    assert "eval: mean return 1.00 over 3 episodes" in capsys.readouterr().out
