@@ -19,7 +19,7 @@ import pytest
 import stori_jax
 from stori_jax import Config, ConceptDrift, ObservationMask
 
-from _env_support import emulator_states, make, process_gone, wait_gone
+from _env_support import emulator_states, make, process_gone, run_env, wait_gone
 
 
 def test_close_stops_every_worker_and_later_calls_raise():
@@ -787,3 +787,181 @@ def test_a_config_bound_to_another_spelling_of_the_game_fits():
         assert env.plan.game == "Pong"
         env.reset()
         assert env.step(np.zeros(2, np.int32))[0].shape == (2, 128)
+
+
+@pytest.mark.timeout(30)
+def test_a_dead_workers_error_names_its_index_envs_pid_and_exit_code():
+    """3 envs on 2 workers: worker 1 holds env 2 alone.  Killed, it is named with its envs,
+    its pid and how it ended, so that a user can tell an OOM kill (-9) from a crash."""
+    env = make("Breakout", num_envs=3, num_workers=2, inline_envs=0)
+    env.reset()
+    pid = env.backend.pids[1]
+    os.kill(pid, signal.SIGKILL)
+    env.backend.processes[1].join(5)
+    with pytest.raises(stori_jax.WorkerError, match=rf"emulator worker 1 \(envs 2\.\.2, pid "
+                                                    rf"{pid}\) died .*with exit code -9; the "
+                                                    r"environment is closed"):
+        env.step(np.zeros(3, np.int32))
+    assert env.closed
+
+
+def test_a_batch_split_unevenly_between_workers_plays_the_one_worker_run():
+    """3 envs on 2 workers (2 + 1): every env is emulated, with its own seed, as on 1 worker."""
+    actions = np.random.default_rng(1).integers(0, 4, (6, 3), dtype=np.int32)
+    with make("Breakout", preset="1", num_envs=3, num_workers=2, inline_envs=0) as split, \
+            make("Breakout", preset="1", num_envs=3, num_workers=1, inline_envs=0) as whole:
+        got, expected = run_env(split, actions), run_env(whole, actions)
+    np.testing.assert_array_equal(got.ram, expected.ram)
+    np.testing.assert_array_equal(got.stacked("reward"), expected.stacked("reward"))
+    assert len({bytes(r) for r in got.ram[-1]}) == 3  # three emulators of their own
+
+
+def test_a_second_send_is_refused_and_leaves_the_step_in_flight_untouched():
+    """send() while a step is in flight is refused before it writes anything: the step in
+    flight (its inline env emulated only in recv(), its worker stopped meanwhile) finishes with
+    its own actions, as an uninterrupted twin's; the backend refuses a second command too."""
+    kw = dict(num_envs=2, num_workers=1, inline_envs=1)
+    env, twin = make("Breakout", **kw), make("Breakout", **kw)
+    try:
+        env.reset()
+        twin.reset()
+        actions = np.array([1, 3], np.int32)
+        with stopped(env.backend.pids[0]):
+            env.send(actions)
+            with pytest.raises(RuntimeError, match="already in flight"):
+                env.send(np.array([2, 2], np.int32))
+            with pytest.raises(RuntimeError, match="already in flight"):
+                env.backend.send_step()
+        assert_same_steps(env, twin, env.recv(timeout=30), actions)
+    finally:
+        env.close()
+        twin.close()
+
+
+def test_workers_ignore_a_ctrl_c_sent_to_the_whole_process_group():
+    """A terminal's Ctrl-C reaches every process of its foreground group: the workers leave it
+    to the parent (which decides whether the step stays in flight) and keep emulating."""
+    with ctrl_c_armed():  # workers that would inherit SIGINT ignored from the runner do not
+        env = make("Breakout", num_workers=2, inline_envs=0)
+    twin = make("Breakout")
+    try:
+        env.reset()
+        twin.reset()
+        for pid in env.backend.pids:
+            os.kill(pid, signal.SIGINT)
+        time.sleep(0.3)  # delivered before the next command
+        assert not any(process_gone(pid) for pid in env.backend.pids)
+        assert_same_steps(env, twin, env.step([1, 2]), np.array([1, 2], np.int32))
+    finally:
+        env.close()
+        twin.close()
+
+
+def test_close_asks_the_workers_to_stop_before_terminating_them():
+    """close() sends every worker its stop command and they exit by themselves (exit code 0),
+    instead of being terminated (SIGTERM) after a second's grace each."""
+    env = make("Breakout", num_envs=3, num_workers=3)
+    env.reset()
+    env.step(np.zeros(3, np.int32))
+    processes = list(env.backend.processes)
+    env.close()
+    assert [p.exitcode for p in processes] == [0, 0, 0]
+
+
+UNGUARDED = """
+import numpy as np, stori_jax
+print("script ran", flush=True)
+env = stori_jax.make("Breakout", num_envs=2, seed=0, obs="ram", num_workers=1)
+env.reset()
+print("stepped", env.step(np.zeros(2, np.int32))[0].shape, flush=True)
+env.close()
+"""
+
+
+def test_a_script_without_a_main_guard_is_not_run_again_in_the_workers(tmp_path):
+    """The workers are spawned: they would import the user's script as their __main__ and run
+    it again (make() inside a starting worker then fails).  They import none of it."""
+    script = tmp_path / "unguarded.py"
+    script.write_text(UNGUARDED)
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert out.stdout.splitlines() == ["script ran", "stepped (2, 128)"], out.stdout
+
+
+def test_a_restore_leaves_no_state_files_behind(tmp_path, monkeypatch):
+    """The states reach the workers through files: they are removed once the workers read them."""
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    with make("Breakout", num_envs=3, num_workers=2, inline_envs=0) as env:
+        env.reset()
+        snapshot = env.snapshot()
+        env.step(np.ones(3, np.int32))
+        env.restore(snapshot)
+        assert list(tmp_path.iterdir()) == []
+        env.step(np.ones(3, np.int32))
+
+
+def test_ctrl_c_after_the_first_worker_got_a_snapshot_command_points_to_reset():
+    """Ctrl-C between sending the snapshot command to one worker and the next: the env knows
+    the workers owe replies, so every call points to reset(), which collects them; the env then
+    goes on as an uninterrupted twin.  (Otherwise the next step would take the snapshot's
+    reply for its own, and read buffers the worker is still writing.)"""
+    env, twin = (make("Breakout", num_workers=2, inline_envs=0) for _ in range(2))
+    try:
+        env.reset()
+        twin.reset()
+        signal_after(env.backend.conns[0], "send_bytes")
+        with ctrl_c_armed(), pytest.raises(KeyboardInterrupt):
+            env.snapshot()
+        assert env.backend.pending
+        with pytest.raises(RuntimeError, match=r"reset\(\)"):
+            env.step([0, 1])
+        np.testing.assert_array_equal(np.asarray(env.reset()[0]), np.asarray(twin.reset()[0]))
+        assert_same_steps(env, twin, env.step([1, 1]), np.array([1, 1], np.int32))
+    finally:
+        env.close()
+        twin.close()
+
+
+KILLED_PARENT = """
+import os, signal, time, warnings
+import numpy as np, stori_jax
+warnings.simplefilter("ignore")  # JAX's warning about the fork
+env = stori_jax.make("Breakout", num_envs=2, seed=0, obs="ram", num_workers=2, inline_envs=0)
+env.reset()
+env.step(np.zeros(2, np.int32))
+child = os.fork()
+if child == 0:  # holds copies of the parent's pipe ends: the workers see no end of file
+    devnull = os.open(os.devnull, os.O_RDWR)
+    os.dup2(devnull, 1)
+    os.dup2(devnull, 2)
+    time.sleep(60)
+    os._exit(0)
+print(child, *env.backend.pids, flush=True)
+os.kill(os.getpid(), signal.SIGKILL)  # no close(), no exit handlers
+"""
+
+
+@pytest.mark.timeout(60)
+def test_workers_stop_when_their_parent_is_killed(tmp_path):
+    """Killed outright (SIGKILL, the OOM killer), the parent closes nothing; a process it forked
+    still holds its pipe ends, so the workers see no end of file.  They exit anyway: they watch
+    their parent."""
+    script = tmp_path / "killed.py"
+    script.write_text(KILLED_PARENT)
+    with open(tmp_path / "stderr.txt", "w") as stderr:
+        parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE,
+                                  stderr=stderr, text=True)
+    pids = [int(p) for p in parent.stdout.readline().split()]
+    try:
+        assert parent.wait(timeout=30) == -signal.SIGKILL and len(pids) == 3, \
+            (tmp_path / "stderr.txt").read_text()[-2000:]
+        workers = pids[1:]
+        assert wait_gone(workers, 5.0), [p for p in workers if not process_gone(p)]
+    finally:
+        parent.stdout.close()
+        for pid in pids:  # the forked child, and workers that outlived their parent
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)

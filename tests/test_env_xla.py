@@ -220,3 +220,48 @@ def test_a_failed_restore_of_an_xla_driven_env_needs_a_reset():
             env.step(np.zeros(2, np.int32))
         env.restore(snap)  # a good restore (or a reset) continues
         env.step(np.zeros(2, np.int32))
+
+
+def test_a_handle_taken_after_an_episode_end_starts_with_the_reset_step():
+    """autoreset=False: an episode that ended in a Python step is reset by the next step, also
+    when that step is the first through env.xla() (the handle carries the pending reset)."""
+    kw = dict(autoreset=False, max_episode_frames=8)
+    actions = np.array([[1, 3], [2, 0], [3, 1]], np.int32)
+    with make("Breakout", **kw) as env:
+        env.reset()
+        expected = python_steps(env, actions)
+    with make("Breakout", **kw) as env:
+        env.reset()
+        first = python_steps(env, actions[:2])
+        assert first[3][-1].all()  # truncated: the cap of 8 frames
+        handle, step = env.xla()
+        handle, got = step(handle, jnp.asarray(actions[2]))
+    assert np.asarray(got[4]["reset_step"]).all()
+    assert_same(to_numpy(jax.tree.map(lambda x: x[None], got)),
+                jax.tree.map(lambda x: x[2:], expected))
+
+
+def test_after_an_error_in_an_xla_step_no_handle_is_current_until_reset():
+    """An emulator failing under an xla step (here the env emulated in this process): the
+    latest handle is stale too, and Python steps point to reset(), after which the env goes on
+    as a fresh twin."""
+    kw = dict(num_envs=2, num_workers=1, inline_envs=1)
+    with make("Breakout", **kw) as env, make("Breakout", **kw) as twin:
+        env.reset()
+        handle, step = env.xla()
+        handle, _ = step(handle, jnp.zeros(2, jnp.int32))
+
+        def broken():
+            raise RuntimeError("emulator failed")
+
+        env.backend._inline[0].step = broken
+        with pytest.raises(jax.errors.JaxRuntimeError, match="emulator failed"):
+            step(handle, jnp.ones(2, jnp.int32))
+        del env.backend._inline[0].step
+        with pytest.raises(jax.errors.JaxRuntimeError, match=STALE):
+            step(handle, jnp.ones(2, jnp.int32))
+        with pytest.raises(RuntimeError, match=r"call reset\(\) first"):
+            env.step(np.zeros(2, np.int32))
+        np.testing.assert_array_equal(np.asarray(env.reset()[0]), np.asarray(twin.reset()[0]))
+        actions = random_actions(4, 3, 2, seed=9)
+        assert_same(python_steps(env, actions), python_steps(twin, actions))

@@ -432,3 +432,72 @@ def test_the_fork_guard_takes_no_lock_in_the_child():
     out = subprocess.run([sys.executable, "-c", FORK_WHILE_JAX_IS_BUSY], capture_output=True,
                          text=True, timeout=120)
     assert out.stdout.strip() == "child exited", out.stdout + out.stderr
+
+
+@pytest.mark.parametrize("vector", [False, True])
+def test_an_episode_cut_by_the_frame_cap_is_truncated_not_terminated(vector):
+    """max_episode_frames=8 at frame_skip 4: the second step hits the cap, which gymnasium
+    calls truncation (the game did not end: bootstrapping agents must tell the two apart)."""
+    env = (gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, obs="ram", max_episode_frames=8)
+           if vector else gym.make("stori_jax/Breakout-3.1-v0", obs="ram", max_episode_frames=8))
+    try:
+        env.reset(seed=0)
+        action = np.zeros(2, np.int64) if vector else 0
+        _, _, terminated, truncated, _ = env.step(action)
+        assert not np.any(terminated) and not np.any(truncated)
+        _, _, terminated, truncated, info = env.step(action)
+        assert np.all(truncated) and not np.any(terminated)
+        assert np.all(info["episode_length"] == 2)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("vector", [False, True])
+def test_a_plain_reset_goes_on_with_np_random_and_a_seed_restarts_it(vector):
+    """As gymnasium's envs: reset(seed=k) reseeds np_random, a later reset() leaves it going on
+    (np_random_seed still k), so an agent drawing from it does not replay its draws."""
+    env = (gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, obs="ram") if vector
+           else gym.make("stori_jax/Breakout-3.1-v0", obs="ram"))
+    try:
+        env.reset(seed=3)
+        first = env.np_random.random(4)
+        env.reset()
+        assert env.np_random_seed == 3
+        assert not np.array_equal(env.np_random.random(4), first)
+        env.reset(seed=3)
+        np.testing.assert_array_equal(env.np_random.random(4), first)
+    finally:
+        env.close()
+
+
+def test_the_step_that_resets_a_single_env_reports_reward_0():
+    """An episode truncated on a step that scored: the next step() resets the env and reports
+    reward 0 and the new episode's first observation, not the scoring step's reward again."""
+    from _env_support import breakout_tracker
+
+    def scoring_actions():  # follow the ball until a brick is hit
+        with gym.make("stori_jax/Breakout-3.1-v0", obs="ram") as env:
+            _, info = env.reset(seed=0)
+            actions = []
+            for _ in range(400):
+                actions.append(int(breakout_tracker(info["ram"][None])[0]))
+                _, reward, _, _, info = env.step(actions[-1])
+                if reward > 0:
+                    return actions, reward
+        raise AssertionError("the tracker should score within 400 steps")
+
+    actions, scored = scoring_actions()
+    # the same game, cut by the frame cap on its scoring step
+    env = gym.make("stori_jax/Breakout-3.1-v0", obs="ram", max_episode_frames=4 * len(actions))
+    try:
+        first, _ = env.reset(seed=0)
+        for a in actions:
+            obs, reward, terminated, truncated, info = env.step(a)
+        assert truncated and not terminated and reward == scored
+        assert info["episode_return"] == scored
+        obs, reward, terminated, truncated, info = env.step(0)
+        assert info["reset_step"] and reward == 0.0 and not (terminated or truncated)
+        assert info["episode_return"] == 0.0
+        np.testing.assert_array_equal(obs, first)
+    finally:
+        env.close()

@@ -84,3 +84,22 @@ def test_outside_the_main_thread_the_block_changes_no_handler(sigint_handler):
     thread.start()
     thread.join()
     assert seen == [signal.default_int_handler]
+
+
+def test_under_the_default_action_a_ctrl_c_still_stops_the_process_when_the_block_ends():
+    """SIG_DFL (a process that reset Ctrl-C to its default, killing, action): the interrupt is
+    held until the block ends, then delivered, not dropped."""
+    import subprocess
+    import sys
+
+    code = ("import signal\n"
+            "from stori_jax.backends.interrupts import interrupts_deferred\n"
+            "signal.signal(signal.SIGINT, signal.SIG_DFL)\n"
+            "with interrupts_deferred():\n"
+            "    signal.raise_signal(signal.SIGINT)\n"
+            "    print('block ran to its end', flush=True)\n"
+            "print('the interrupt was lost', flush=True)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=60)
+    assert out.stdout == "block ran to its end\n", out.stdout + out.stderr
+    assert out.returncode == -signal.SIGINT

@@ -6,6 +6,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -242,3 +243,68 @@ def test_a_closed_pipe_ends_the_command_quietly():
     child.stdout.close()  # before the command writes
     err = child.stderr.read()
     assert child.wait(timeout=60) == 1 and err == ""
+
+
+def test_every_default_the_help_states_is_the_default_used():
+    """'(default N)' in a flag's help is what the command uses without the flag."""
+    from stori_jax.cli import build_parser
+
+    checked = 0
+    commands = build_parser()._subparsers._group_actions[0].choices
+    for command, parser in commands.items():
+        for action in parser._actions:
+            stated = re.search(r"\(default (-?[\d.]+)\)", action.help or "")
+            if stated:
+                assert action.default == type(action.default)(stated.group(1)), \
+                    (command, action.dest)
+                checked += 1
+    assert checked >= 8
+
+
+def test_cli_run_plays_the_observation_granularity_and_seed_asked_for(capsys, monkeypatch):
+    """--obs and --granularity reach the env (one action draw per agent step at 'step'), and
+    --seed is the env's seed and the random policy's key stream."""
+    import stori_jax.suite
+
+    seeds, real_play = [], stori_jax.suite.play
+
+    def play(env, obs, seed, **kwargs):
+        seeds.append((env.seed, seed))
+        return real_play(env, obs, seed, **kwargs)
+
+    monkeypatch.setattr(stori_jax.suite, "play", play)
+    assert main(["run", "Breakout", "1", "--steps", "3", "--num-envs", "2", "--seed", "3",
+                 "--obs", "ram", "--granularity", "step", "--num-workers", "1",
+                 "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "obs='ram', granularity='step')" in out.splitlines()[0]
+    assert re.search(r"corrupted actions : \d+ of 6 ", out)  # 3 steps x 2 envs x 1 draw
+    assert seeds == [(3, 3)]
+
+
+def test_show_and_record_play_the_asked_config_into_a_file_named_after_it(tmp_path,
+                                                                        monkeypatch):
+    """Without --out the picture is <game>-<preset>.<ext> (the preset as the paper spells it),
+    or <game>-<config file name>.<ext>; the preset's or the file's config is the one played."""
+    import json
+
+    import stori_jax.visual
+
+    written = []
+    for name in ("contact_sheet", "record_episode"):
+        monkeypatch.setattr(stori_jax.visual, name,
+                            lambda game, preset, config, path, **kw: written.append(
+                                (game, preset, config, path)) or path)
+    monkeypatch.chdir(tmp_path)
+    reference = {"stochasticity_type": "1", "intrinsic_stochasticity.action_dependent."
+                                            "stochastic_action_prob": 0.45}
+    (tmp_path / "mine.json").write_text(json.dumps(reference))
+    assert main(["show", "Breakout", "3.2a"]) == 0
+    assert main(["record", "Boxing"]) == 0
+    assert main(["show", "Gopher", "--config", "mine.json"]) == 0
+    assert written == [
+        ("Breakout", "3.2A", stori_jax.preset("Breakout", "3.2A"), Path("Breakout-3.2A.png")),
+        ("Boxing", "3.1", stori_jax.Config(), Path("Boxing-3.1.gif")),
+        ("Gopher", "mine", stori_jax.Config.from_reference(reference, game="Gopher"),
+         Path("Gopher-mine.png"))]
+    assert written[2][2].action_noise.prob == 0.45

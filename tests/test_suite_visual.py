@@ -199,3 +199,158 @@ def test_the_suite_plays_a_quota_of_episodes_per_env_not_the_first_to_end():
                  policy=lambda obs, key: np.zeros(2, np.int32))
     assert stats["episodes"] == 8 and stats["mean_return"] == 5.5
     assert stats["agent_steps"] == 20  # env 1's fourth episode ends at step 20
+
+
+def test_the_table_puts_each_value_under_its_own_column():
+    from stori_jax.suite import table
+
+    row = dict(game="Boxing", preset="2.1", definition="event", mean_return=1.25, episodes=7,
+               events_fired=31, corrupted_actions=5, corrupted_fraction=0.25,
+               masked_fraction=0.5, env_steps_per_s=1234.4)
+    header, rule, line = table([row]).splitlines()
+    names = [c.strip() for c in header.strip("|").split("|")]
+    cells = [c.strip() for c in line.strip("|").split("|")]
+    assert len(names) == len(cells) == rule.count("---")
+    assert dict(zip(names, cells)) == {
+        "game": "Boxing", "preset": "2.1", "definition": "event", "mean return": "1.2",
+        "episodes": "7", "events fired": "31", "corrupted actions (of draws)": "5 (25%)",
+        "masked obs": "50%", "env steps/s": "1234"}
+
+
+def test_each_gallery_sheet_is_made_of_its_own_preset_with_the_runs_seed(tmp_path,
+                                                                         monkeypatch):
+    """Every contact sheet shows its own preset's config, played with the suite's seed, and
+    lands under its own name (no emulator runs: the sheets and rows are stand-ins)."""
+    import stori_jax.suite
+    import stori_jax.visual
+
+    made = []
+
+    def sheet(game, name, config, path, *, seed):
+        made.append((game, name, config, seed))
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(f"{game} {name}")
+        return path
+
+    def row(game, name, **kwargs):
+        return dict(game=game, preset=name, definition=stori_jax.describe_preset(game, name),
+                    mean_return=None, episodes=0, events_fired=0, corrupted_actions=0,
+                    corrupted_fraction=0.0, masked_fraction=0.0, env_steps_per_s=1.0)
+
+    monkeypatch.setattr(stori_jax.visual, "contact_sheet", sheet)
+    monkeypatch.setattr(stori_jax.suite, "run_preset", row)
+    presets = [("Breakout", "3.2A"), ("Boxing", "1"), ("Gopher", "2.2")]
+    out = stori_jax.suite.run_suite(presets, episodes=1, num_envs=1, max_steps=1, seed=5,
+                                    out=tmp_path / "suite", gallery=True, progress=False)
+    assert made == [(g, n, stori_jax.preset(g, n), 5) for g, n in presets]
+    for game, name in presets:
+        assert (out / "gallery" / f"{game}-{name}.png").read_text() == f"{game} {name}"
+    assert "[Boxing 1](gallery/Boxing-1.png)" in (out / "table.md").read_text()
+
+
+def test_run_preset_plays_the_env_of_the_suites_seed(monkeypatch):
+    """The suite's --seed is the env's seed and the agent's key stream (agent_key(seed))."""
+    import stori_jax.suite
+
+    seen = []
+
+    def play(env, obs, seed, **kwargs):
+        seen.append((env.seed, seed, env.plan.obs, env.num_envs))
+        return {}
+
+    monkeypatch.setattr(stori_jax.suite, "play", play)
+    row = stori_jax.suite.run_preset("Breakout", "1", episodes=1, num_envs=2, max_steps=1,
+                                     seed=5)
+    assert seen == [(5, 5, "atari84", 2)]
+    assert (row["game"], row["preset"]) == ("Breakout", "1")
+
+
+class _SwitchingEnv:
+    """Scripted infos: events, and concepts that switch, end with an episode, and restart."""
+
+    num_envs, num_actions = 2, 4
+    script = [  # (concept, done, events) per step
+        ([0, 1], [False, False], [2, 0]),
+        ([1, 1], [True, False], [0, 0]),   # env 0 switches, then its episode ends
+        ([0, 1], [False, False], [0, 3]),  # env 0's new episode starts in concept 1 (0)
+        ([0, 0], [False, True], [1, 1]),   # env 1 switches back
+    ]
+
+    def __init__(self):
+        self.t = 0
+
+    def step(self, actions):
+        concept, done, events = (np.array(x) for x in self.script[self.t])
+        self.t += 1
+        info = dict(episode_return=np.where(done, 1.0, 0.0), event_fired=events,
+                    action_corrupted=np.zeros((2, 1), bool), obs_masked=np.zeros(2, bool),
+                    concept=concept.astype(np.int32))
+        return np.zeros((2, 1)), np.zeros(2), done, np.zeros(2, bool), info
+
+
+def test_play_counts_every_event_and_no_switch_at_a_new_episode():
+    """Events are summed over envs and steps; a concept switch is counted where an episode's
+    concept changes, not where a new episode starts again in concept 1."""
+    from stori_jax.suite import play
+
+    stats = play(_SwitchingEnv(), np.zeros((2, 1)), 0, max_steps=4,
+                 policy=lambda obs, key: np.zeros(2, np.int32))
+    assert stats["events_fired"] == 7
+    assert stats["concept_switches"] == 3  # env 1 at step 1 and 4, env 0 at step 2
+    assert stats["agent_steps"] == 4 and stats["episodes"] == 2
+
+
+def test_the_suite_takes_games_and_presets_in_any_case():
+    from stori_jax.cli import selected_presets
+
+    assert selected_presets(["breakout", "BOXING"], ["3.2a", "1"]) == [
+        ("Breakout", "1"), ("Breakout", "3.2A"), ("Boxing", "1"), ("Boxing", "3.2A")]
+
+
+def _replay(game, config, actions, **kw):
+    """(screens, infos) of a fresh env of ``config`` (3.1 if None) stepped with ``actions``."""
+    with stori_jax.make(game, config=config, num_envs=1, seed=0, obs="raw", num_workers=1,
+                        autoreset=False, **kw) as env:
+        obs, info = env.reset()
+        screens, infos = [np.asarray(obs[0])], [info]
+        for a in actions:
+            obs, *_, info = env.step(np.array([a], np.int32))
+            screens.append(np.asarray(obs[0]))
+            infos.append(info)
+    return screens, infos
+
+
+def test_the_twin_plays_the_intended_actions_and_flags_are_the_presets():
+    """twin_run: the 3.1 twin gets the intended actions (not the corrupted ones the preset
+    executed), and each step's flags are what the preset's env reported."""
+    from stori_jax.visual import twin_run
+
+    config = stori_jax.Config(action_noise=stori_jax.ActionNoise(0.5),
+                              observation=stori_jax.ObservationMask("crop", 1, prob=0.5))
+    frames = twin_run("Breakout", config, 12, seed=0)
+    intended = [f["action"] for f in frames[1:]]
+    executed = [f["executed"][-1] for f in frames[1:]]
+    assert intended != executed, "the run should corrupt some actions"
+    twin, _ = _replay("Breakout", None, intended)
+    preset, infos = _replay("Breakout", config, intended)
+    for t, f in enumerate(frames):
+        np.testing.assert_array_equal(f["twin"], twin[t], err_msg=f"twin, step {t}")
+        np.testing.assert_array_equal(f["preset"], preset[t], err_msg=f"preset, step {t}")
+        assert f["masked"] == bool(np.asarray(infos[t]["obs_masked"])[0]), t
+        assert f["corrupted"] == bool(np.asarray(infos[t]["action_corrupted"]).any()), t
+    assert {f["masked"] for f in frames} == {False, True}
+
+
+def test_a_contact_sheets_top_row_is_the_twin_and_its_bottom_row_the_preset(tmp_path):
+    """Boxing 3.2A blacks out the scores and the clock: the first column's top screen is the
+    3.1 twin's first observation, the bottom one the same screen with those parts filled."""
+    path = tmp_path / "sheet.png"
+    assert main(["show", "Boxing", "3.2A", "--steps", "3", "--out", str(path)]) == 0
+    sheet = np.asarray(Image.open(path).convert("RGB"))
+    x0, top = 6, 36 + 16  # see test_show_puts_the_mask_on_the_preset_side_only
+    upper = sheet[top:top + 210, x0:x0 + 160]
+    lower = sheet[top + 210 + 6 + 16:top + 2 * 210 + 6 + 16, x0:x0 + 160]
+    (screen,), _ = _replay("Boxing", None, [])
+    np.testing.assert_array_equal(upper, screen)
+    hidden = (lower != screen).any(axis=-1)
+    assert hidden.any() and len(np.unique(lower[hidden], axis=0)) == 1  # one fill colour
