@@ -96,7 +96,7 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100,
     else:
         from stori_jax.suite import random_policy
 
-        seed = 0 if seed is None else seed
+        seed = 0 if seed is None else check_int("seed", seed, 0)
         eval_seed = seed + EVAL_SEED_OFFSET if eval_seed is None else eval_seed
         choose = random_policy(stori_jax.get_game(game).num_actions)
 

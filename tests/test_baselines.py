@@ -644,6 +644,8 @@ def test_random_evaluation_is_reproducible_and_exact_in_count(tmp_path):
     b = evaluate("Breakout", "3.1", **kw)
     assert a["returns"] == b["returns"] and len(a["returns"]) == 3
     assert a["eval_seed"] == 10_000 and a["agent"] == "random"
+    with pytest.raises(ValueError, match="seed must be >= 0, got -1"):
+        evaluate("Breakout", "3.1", seed=-1, **kw)
     assert write_result(a, tmp_path).name == "eval-random.json"
 
 
