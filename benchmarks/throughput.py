@@ -417,6 +417,25 @@ def _check_arguments(parser, args):
     output_directory(parser, args.out)
 
 
+SWEEP_SIZES = {False: [8, 16, 32, 64], True: [8, 32]}  # B of the 3.1 sweep, by --quick
+
+
+def name_suffix(parser, args) -> str:
+    """What sets this run apart from a default full run, for its file names (a run with other
+    options never overwrites a full run of the same day, nor one with other options): --quick,
+    the games and presets named, and every other option that differs from its default."""
+    parts = ["quick"] if args.quick else []
+    parts += ["-".join(names) for names in (args.games, args.presets) if names]
+    if args.sizes != SWEEP_SIZES[args.quick]:
+        parts.append("B" + "-".join(map(str, args.sizes)))
+    for name in ("batch", "workers", "seconds"):
+        if getattr(args, name) != parser.get_default(name):
+            parts.append(f"{name}{getattr(args, name):g}")
+    if args.skip_naive:
+        parts.append("no-naive")
+    return "".join(f"-{part}" for part in parts)
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -435,16 +454,16 @@ def main(argv=None):
     args = parser.parse_args(argv)
     _check_arguments(parser, args)
     if args.sizes is None:
-        args.sizes = [8, 32] if args.quick else [8, 16, 32, 64]
+        args.sizes = SWEEP_SIZES[args.quick]
     from stori_jax.provenance import software
 
     meta = dict(date=datetime.date.today().isoformat(), host=socket.gethostname(),
                 cores=cores(), workers=args.workers,
-                seconds=args.seconds, argv=sys.argv[1:], software=software())
+                seconds=args.seconds, argv=sys.argv[1:] if argv is None else list(argv),
+                software=software())
     results = add_ratios(run(args))
     args.out.mkdir(parents=True, exist_ok=True)
-    subset = "".join(f"-{'-'.join(names)}" for names in (args.games, args.presets) if names)
-    stem = args.out / f"{meta['date']}-{meta['host']}{subset}"  # a subset never overwrites a run
+    stem = args.out / f"{meta['date']}-{meta['host']}{name_suffix(parser, args)}"
     Path(f"{stem}.json").write_text(json.dumps(dict(meta=meta, results=results), indent=1))
     table = markdown(results, meta)
     Path(f"{stem}.md").write_text(table)

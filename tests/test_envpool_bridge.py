@@ -106,6 +106,29 @@ def test_episode_statistics_and_next_step_reset():
     pytest.fail("no episode ended")
 
 
+def test_episode_statistics_start_afresh_after_envpools_own_reset():
+    """The second episode of an env counts from the step envpool reset it on, not from the
+    first episode's start."""
+    with stori_jax.make("Breakout", num_envs=2, seed=3, obs="ram", **EP) as env:
+        env.reset()
+        rng = np.random.default_rng(0)
+        total, length, ended = np.zeros(2), np.zeros(2, int), np.zeros(2, int)
+        for _ in range(3000):
+            _, reward, terminated, truncated, info = env.step(rng.integers(0, 4, 2))
+            reset_step = np.asarray(info["reset_step"])
+            total = np.where(reset_step, 0, total + np.asarray(reward))
+            length = np.where(reset_step, 0, length + 1)
+            done = np.asarray(terminated | truncated)
+            np.testing.assert_array_equal(np.asarray(info["episode_return"]),
+                                          np.where(done, total, 0))
+            np.testing.assert_array_equal(np.asarray(info["episode_length"]),
+                                          np.where(done, length, 0))
+            ended += done
+            if ended.min() >= 2:
+                return
+    pytest.fail(f"too few episodes ended: {ended}")
+
+
 @pytest.mark.parametrize("kwargs, message", [
     (dict(preset="2.1"), "2.1 random events write the RAM"),
     (dict(preset="3.2C", game="Boxing"), "RAM observation modes"),
@@ -232,3 +255,25 @@ def test_an_envpool_episode_is_the_whole_game_not_one_life():
             if terminated[0] or truncated[0]:
                 break
     assert terminated[0] and int(info["lives"][0]) == 0
+
+
+def test_the_pool_gets_the_options_the_bridge_documents():
+    """Every option a make() argument maps to, as envpool sees it: the frame skip, no-op starts
+    plus one, the hashed seed, the step cap rounded up, and no Atari preprocessing of envpool's
+    own (episodic life, reward clipping, fire reset, sticky actions, the full action set)."""
+    from envpool_bridge import envpool_seed
+
+    with stori_jax.make("Breakout", "3.1", num_envs=2, seed=3, frame_skip=2, noop_max=5,
+                        max_episode_frames=1001, **EP) as env:
+        config = env.backend.pool.config
+        env.reset(seed=7)
+        reseeded = env.backend.pool.config["seed"]
+    assert {k: config[k] for k in (
+        "num_envs", "batch_size", "frame_skip", "noop_max", "seed", "max_episode_steps",
+        "stack_num", "img_height", "img_width", "gray_scale", "episodic_life", "reward_clip",
+        "use_fire_reset", "repeat_action_probability", "full_action_space")} == dict(
+        num_envs=2, batch_size=2, frame_skip=2, noop_max=6, seed=envpool_seed(3),
+        max_episode_steps=501, stack_num=1, img_height=210, img_width=160, gray_scale=False,
+        episodic_life=False, reward_clip=False, use_fire_reset=False,
+        repeat_action_probability=0.0, full_action_space=False)
+    assert reseeded == envpool_seed(7)
