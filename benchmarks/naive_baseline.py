@@ -136,10 +136,26 @@ class StoriNumpyWrapper(gym.Wrapper):
         return frame, total, terminated, truncated, info
 
 
+def check_supported(config) -> None:
+    """Refuse a config this baseline cannot play as stori-jax does (the paper's presets are all
+    playable): it perturbs per frame, draws uniform replacements and plays screens (a config
+    has one part of each type, concept 2's included: Config refuses two)."""
+    refused = []
+    if config.granularity != "frame":
+        refused.append(f"granularity {config.granularity!r} (it perturbs per frame)")
+    if config.ram_observation:
+        refused.append("ram_observation (it plays screens)")
+    if any(getattr(part, "sticky", False) for _, part, _ in config.components()):
+        refused.append("sticky action noise (it draws uniform replacements)")
+    if refused:
+        raise ValueError("the naive baseline cannot play this config: " + "; ".join(refused))
+
+
 def make_naive_vector_env(game_name: str, config, num_envs: int, seed: int, frame_skip: int = 4):
     """gymnasium.vector.AsyncVectorEnv of wrapped frameskip=1 ALE envs, one process each."""
     from stori_jax.games import get_game
 
+    check_supported(config)
     game = get_game(game_name)
 
     def thunk(i):

@@ -524,6 +524,23 @@ def naive_wrapper(monkeypatch, game, preset):
     return wrapper, env
 
 
+def test_the_naive_baseline_refuses_what_it_cannot_play_and_plays_every_paper_preset(
+        monkeypatch):
+    naive = script(monkeypatch, "naive_baseline")
+    from stori_jax.presets import list_presets
+
+    for game, name in list_presets():
+        naive.check_supported(stori_jax.preset(game, name))
+    noise = stori_jax.ActionNoise(0.1)
+    for config, refused in (
+            (stori_jax.Config(action_noise=noise, granularity="step"), "granularity 'step'"),
+            (stori_jax.Config(ram_observation=True), "ram_observation"),
+            (stori_jax.Config(action_noise=stori_jax.ActionNoise(0.1, sticky=True)), "sticky")):
+        with pytest.raises(ValueError, match=f"the naive baseline cannot play this config: "
+                                             f".*{refused}"):
+            naive.make_naive_vector_env("Breakout", config, 2, seed=0)
+
+
 def test_a_naive_step_plays_the_frame_skip_and_max_pools_the_last_two_screens(monkeypatch):
     wrapper, env = naive_wrapper(monkeypatch, "Breakout", "3.1")
     frame, reward, terminated, truncated, _ = wrapper.step(2)
