@@ -13,7 +13,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from stori_jax.backends.interrupts import interrupts_deferred
+from stori_jax.backends.interrupts import (interrupts_deferred, note_lost_interrupts,
+                                           raise_lost_interrupt)
 from stori_jax.backends.layout import RAM_SIZE, SCREEN, shared_bytes
 from stori_jax.backends.subproc import (MAX_TIMEOUT_S, EnvClosedError, InterruptedStepError,
                                         SubprocBackend, WorkersLate)
@@ -240,6 +241,7 @@ class Env:
         self.config = config
         self.seed = seed
         self._owner_pid = os.getpid()  # the workers (or envpool's threads) answer this process
+        note_lost_interrupts()
         self.game = get_game(plan.game)
         self.backend = backend
         self.num_envs = plan.num_envs
@@ -314,6 +316,7 @@ class Env:
                 "Make an env in this process (started with the 'spawn' method)")
         if self.closed:
             raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
+        raise_lost_interrupt()  # a Ctrl-C Python dropped since: nothing has started yet
 
     # -- reset ----------------------------------------------------------------------------------
 

@@ -103,3 +103,43 @@ def test_under_the_default_action_a_ctrl_c_still_stops_the_process_when_the_bloc
                          timeout=60)
     assert out.stdout == "block ran to its end\n", out.stdout + out.stderr
     assert out.returncode == -signal.SIGINT
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
+def test_a_ctrl_c_python_dropped_in_a_gc_callback_stops_the_next_env_call():
+    """A Ctrl-C whose handler ran inside a garbage-collection callback (JAX has one) cannot
+    propagate there: Python prints "Exception ignored" and goes on.  The env raises it at its
+    next call, before starting anything, and goes on after it as an uninterrupted twin."""
+    import gc
+
+    import numpy as np
+
+    import stori_jax
+
+    env, twin = (stori_jax.make("Breakout", num_envs=2, seed=0, obs="ram", num_workers=1)
+                 for _ in range(2))
+    fired = []
+
+    def ctrl_c_in_a_gc_callback(phase, info):
+        if not fired:
+            fired.append(phase)
+            raise KeyboardInterrupt
+
+    try:
+        env.reset()
+        twin.reset()
+        gc.callbacks.append(ctrl_c_in_a_gc_callback)
+        try:
+            gc.collect()  # Python drops the interrupt, as it drops one landing there
+        finally:
+            gc.callbacks.remove(ctrl_c_in_a_gc_callback)
+        assert fired == ["start"]
+        with pytest.raises(KeyboardInterrupt, match="garbage-collection callback"):
+            env.step(np.ones(2, np.int32))
+        actions = np.array([1, 3], np.int32)
+        for _ in range(3):
+            for got, expected in zip(env.step(actions)[:4], twin.step(actions)[:4]):
+                np.testing.assert_array_equal(np.asarray(got), np.asarray(expected))
+    finally:
+        env.close()
+        twin.close()

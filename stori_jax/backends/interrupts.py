@@ -13,10 +13,39 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import sys
 import threading
 
 
 _deferring: list = []  # non-empty while the main thread is inside a block
+_lost: list = []  # Ctrl-Cs Python had to drop, not yet raised
+_forward_to: list = []  # the unraisable hook in place before note_lost_interrupts'
+
+
+def _note_lost_interrupt(unraisable) -> None:
+    if isinstance(unraisable.exc_value, KeyboardInterrupt):
+        _lost.append(True)
+    (_forward_to[-1] if _forward_to else sys.__unraisablehook__)(unraisable)
+
+
+def note_lost_interrupts() -> None:
+    """Keep the Ctrl-Cs Python drops.  A SIGINT handler runs between any two bytecodes, also
+    inside a garbage-collection callback (JAX registers one) or a ``__del__``, where an exception
+    cannot propagate: Python prints "Exception ignored" and the program goes on as if Ctrl-C had
+    never been pressed.  From this call on such a KeyboardInterrupt is noted (and still
+    printed), and :func:`raise_lost_interrupt` raises it.  Idempotent; a hook installed later
+    replaces this one."""
+    if sys.unraisablehook is not _note_lost_interrupt:
+        _forward_to[:] = [sys.unraisablehook]
+        sys.unraisablehook = _note_lost_interrupt
+
+
+def raise_lost_interrupt() -> None:
+    """Raise the KeyboardInterrupt that Python dropped since the last call, if any."""
+    if _lost:
+        _lost.clear()
+        raise KeyboardInterrupt("Ctrl-C (Python could not raise it where it landed: in a "
+                                "garbage-collection callback or a __del__)")
 
 
 @contextlib.contextmanager
