@@ -420,6 +420,10 @@ def _check_arguments(parser, args):
 SWEEP_SIZES = {False: [8, 16, 32, 64], True: [8, 32]}  # B of the 3.1 sweep, by --quick
 
 
+def _shown(sizes) -> str:
+    return " ".join(map(str, sizes))
+
+
 def name_suffix(parser, args) -> str:
     """What sets this run apart from a default full run, for its file names (a run with other
     options never overwrites a full run of the same day, nor one with other options): --quick,
@@ -440,11 +444,12 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true",
-                        help="Breakout only, B in {8, 32} (unless --games / --sizes say otherwise)")
+                        help=f"Breakout only, B in {_shown(SWEEP_SIZES[True])} (unless --games / "
+                        "--sizes say otherwise)")
     parser.add_argument("--seconds", type=float, default=3.0, help="measuring time per run")
     parser.add_argument("--batch", type=int, default=32, help="B for the per-preset runs")
     parser.add_argument("--sizes", type=int, nargs="+", default=None,
-                        help="B of the Breakout 3.1 sweep (default 8 16 32 64)")
+                        help=f"B of the Breakout 3.1 sweep (default {_shown(SWEEP_SIZES[False])})")
     parser.add_argument("--games", nargs="+", default=None, help="default: the four STORI games")
     parser.add_argument("--presets", nargs="+", default=None,
                         help="only these presets (e.g. 3.1 2.2); default: all")

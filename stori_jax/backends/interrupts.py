@@ -19,13 +19,13 @@ import threading
 
 _deferring: list = []  # non-empty while the main thread is inside a block
 _lost: list = []  # Ctrl-Cs Python had to drop, not yet raised
-_forward_to: list = []  # the unraisable hook in place before note_lost_interrupts'
+_forward_to = [sys.__unraisablehook__]  # the hook in place before note_lost_interrupts'
 
 
 def _note_lost_interrupt(unraisable) -> None:
     if isinstance(unraisable.exc_value, KeyboardInterrupt):
         _lost.append(True)
-    (_forward_to[-1] if _forward_to else sys.__unraisablehook__)(unraisable)
+    _forward_to[0](unraisable)
 
 
 def note_lost_interrupts() -> None:
@@ -36,7 +36,7 @@ def note_lost_interrupts() -> None:
     printed), and :func:`raise_lost_interrupt` raises it.  Idempotent; a hook installed later
     replaces this one."""
     if sys.unraisablehook is not _note_lost_interrupt:
-        _forward_to[:] = [sys.unraisablehook]
+        _forward_to[0] = sys.unraisablehook
         sys.unraisablehook = _note_lost_interrupt
 
 
