@@ -14,6 +14,7 @@ from pathlib import Path
 from stori_jax.checks import MAX_SEED, check_int
 from stori_jax.config import GRANULARITIES
 from stori_jax.plan import OBS_KINDS
+from stori_jax.visual import AFTER_SWITCH, SHEET_STEPS
 
 
 def _cmd_list(args) -> int:
@@ -182,10 +183,11 @@ def _config_for(args):
 PICTURE_SUFFIX = {"show": ".png", "record": ".gif"}  # what each command writes
 
 
-def _picture_out(args, steps_flag: str, steps: int):
+def _picture_out(args, steps_flag: str, steps: int | None):
     """(name, config, output path) of ``show`` / ``record``, every argument checked before
     anything runs."""
-    check_int(steps_flag, steps, 1)
+    if steps is not None:
+        check_int(steps_flag, steps, 1)
     check_int("--seed", args.seed, 0, MAX_SEED)
     suffix = PICTURE_SUFFIX[args.command]
     if args.out is not None:
@@ -276,9 +278,11 @@ def build_parser() -> argparse.ArgumentParser:
                        help=f"file to write, ending in .{suffix} (default <game>-<preset>.{suffix}, "
                             f"or <game>-<config file name>.{suffix})")
         if command == "show":
-            p.add_argument("--steps", type=int, default=200,
+            p.add_argument("--steps", type=int, default=None,
                            help="agent steps to play (or until the episode ends); the sheet "
-                                "shows moments spread over them (default 200)")
+                                f"shows moments spread over them (default {SHEET_STEPS}; a 2.2 "
+                                f"preset's T + {AFTER_SWITCH} if longer, so that it reaches "
+                                "concept 2)")
         else:
             p.add_argument("--max-steps", type=int, default=1000,
                            help="agent steps at most, if the episode is longer (default 1000)")

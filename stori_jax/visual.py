@@ -7,11 +7,13 @@ preset does) with raw observations, and draw with Pillow.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from stori_jax.config import Config
 
+SHEET_STEPS = 200  # agent steps a contact sheet plays at most by default
 SCALE = 2  # a recording's screens are drawn at 2x (320x420); contact sheets at 1x
 
 
@@ -44,55 +46,129 @@ def _save_whole(path: Path, save) -> Path:
     return path
 
 
+class Showcase(NamedTuple):
+    """Which episode a picture follows: env ``env_index`` of the seed (random actions drawn
+    for a batch of ``action_batch`` envs each step), from the episode whose first observation
+    agent step ``start`` returned (0: the reset's); ``note``: a line saying so on the picture."""
+
+    env_index: int = 0
+    start: int = 0
+    action_batch: int = 1
+    note: str = ""
+
+
 def twin_run(game: str, config: Config, steps: int, seed: int = 0, *, with_twin: bool = True,
-             progress: str | None = None):
+             progress: str | None = None, showcase: Showcase = Showcase()):
     """Run ``config`` and its 3.1 twin side by side on the same intended actions (the same
     game unless the preset corrupts actions); ``with_twin=False`` runs the preset alone.
     ``progress``: a progress bar's label (None: no bar).
 
+    Both play random actions, and the pictures follow ``showcase``'s episode for ``steps`` steps
+    or until it ends (a batch of ``env_index + 1`` envs: env i plays as in any larger batch).
+
     Returns a list of per-step dicts: 'twin' (None without one) and 'preset' screens
-    (210, 160, 3), the intended and executed actions, and the step's perturbation flags."""
+    (210, 160, 3), the intended and executed actions, and the step's perturbation flags, 'step'
+    counting the episode's agent steps."""
     from tqdm import tqdm
 
     import stori_jax
 
     rng = np.random.default_rng(seed)
-    # no autoreset: the step that ends the episode shows its last screen, not the next one's first
-    kw = dict(num_envs=1, seed=seed, obs="raw", num_workers=1, autoreset=False)
+    k, start = showcase.env_index, showcase.start
+    num_envs = k + 1
+    # no autoreset: the step that ends the episode shows its last screen, not the next one's
+    # first (that comes with the next step, which resets the env instead of stepping it)
+    kw = dict(num_envs=num_envs, seed=seed, obs="raw", num_workers=1, autoreset=False)
     env = stori_jax.make(game, config=config, **kw)
     twin = stori_jax.make(game, **kw) if with_twin else None
 
-    def screen(obs):  # env 0's screen of a batch of one, if there is one
-        return None if obs is None else np.asarray(obs[0])
+    def screen(obs):  # env k's screen, if there is one
+        return None if obs is None else np.asarray(obs[k])
 
     frames = []
     try:
         obs, info = env.reset()
         twin_obs = twin.reset()[0] if twin is not None else None
-        frames.append(dict(step=0, preset=screen(obs), twin=screen(twin_obs),
-                           corrupted=False, event=0, concept=0,
-                           masked=bool(np.asarray(info["obs_masked"])[0]), action=None,
-                           executed=None))
-        for t in tqdm(range(1, steps + 1), desc=progress, unit="step", disable=progress is None):
-            action = np.array([rng.integers(env.num_actions)], np.int32)
-            obs, reward, terminated, truncated, info = env.step(action)
-            executed = np.asarray(info["executed_action"]).reshape(1, -1)
-            # the twin gets the intended action: without type-1 noise it plays the same game
-            twin_obs = twin.step(action)[0] if twin is not None else None
+        for t in tqdm(range(start + steps + 1), desc=progress, unit="step",
+                      disable=progress is None):
+            if t:
+                actions = rng.integers(env.num_actions, size=showcase.action_batch)
+                actions = actions[:num_envs].astype(np.int32)
+                obs, reward, terminated, truncated, info = env.step(actions)
+                # the twin gets the intended actions: without type-1 noise it plays the same game
+                twin_obs = twin.step(actions)[0] if twin is not None else None
+            if t < start:
+                continue
+            first = t == start  # the episode's first observation: no action made it
             frames.append(dict(
-                step=t, preset=screen(obs), twin=screen(twin_obs),
-                corrupted=bool(np.asarray(info["action_corrupted"]).any()),
-                event=int(np.asarray(info["event_fired"])[0]),
-                concept=int(np.asarray(info["concept"])[0]),
-                masked=bool(np.asarray(info["obs_masked"])[0]), action=int(action[0]),
-                executed=executed[0].tolist()))
-            if bool(terminated[0] | truncated[0]):
+                step=t - start, preset=screen(obs), twin=screen(twin_obs),
+                corrupted=not first and bool(np.asarray(info["action_corrupted"])[k].any()),
+                event=0 if first else int(np.asarray(info["event_fired"])[k]),
+                concept=0 if first else int(np.asarray(info["concept"])[k]),
+                masked=bool(np.asarray(info["obs_masked"])[k]),
+                action=None if first else int(actions[k]),
+                executed=None if first else np.asarray(info["executed_action"])[k].reshape(
+                    -1).tolist()))
+            if not first and bool(terminated[k] | truncated[k]):
                 break
     finally:
         env.close()
         if twin is not None:
             twin.close()
     return frames
+
+
+DRIFT_CANDIDATES = 16  # envs a 2.2 picture looks through for an episode that reaches concept 2
+DRIFT_SEARCH = 5  # ... for at most this many times the picture's steps
+AFTER_SWITCH = 100  # agent steps a 2.2 picture plays past T by default
+
+
+def default_steps(config: Config) -> int:
+    """A contact sheet's steps by default: SHEET_STEPS, or for a 2.2 config at least enough to
+    show concept 2 (T + AFTER_SWITCH)."""
+    if config.drift is None:
+        return SHEET_STEPS
+    return max(SHEET_STEPS, config.drift.period + AFTER_SWITCH)
+
+
+def drift_showcase(game: str, config: Config, steps: int, seed: int = 0) -> Showcase:
+    """Which episode a picture of ``config`` follows (for :func:`twin_run`).
+
+    A 2.2 preset switches concept at agent step T of an episode, and a random policy's episode
+    may end before it (Breakout's mostly do, at ~180 steps for T = 300): a picture of env 0's
+    first episode would show concept 1 only.  So a 2.2 picture looks through the episodes of
+    DRIFT_CANDIDATES envs of the seed (playing the random actions ``twin_run`` draws) for the
+    first that reaches concept 2 within ``steps`` steps, for DRIFT_SEARCH x ``steps`` agent
+    steps at most, and follows it (env 0's first episode if none does; the note says so)."""
+    if config.drift is None:
+        return Showcase()
+    period = config.drift.period
+    if steps <= period:  # concept 2 begins at the episode's agent step T + 1 at the earliest
+        return Showcase(note=f"concept 2 begins after agent step {period} of an episode: "
+                             "not shown")
+    import stori_jax
+
+    rng = np.random.default_rng(seed)
+    n, budget = DRIFT_CANDIDATES, DRIFT_SEARCH * steps
+    with stori_jax.make(game, config=config, num_envs=n, seed=seed, obs="raw", num_workers=1,
+                        autoreset=False) as env:
+        env.reset()
+        started = np.zeros(n, np.int64)  # the agent step that began each env's episode
+        for t in range(1, budget + 1):
+            actions = rng.integers(env.num_actions, size=n).astype(np.int32)
+            _, _, _, _, info = env.step(actions)
+            new_episode = np.asarray(info["reset_step"])  # the step after an end resets
+            started[new_episode] = t
+            reached = ~new_episode & (np.asarray(info["concept"]) > 0) & (t - started <= steps)
+            if reached.any():
+                k = int(np.argmax(reached))  # the lowest such env
+                start = int(started[k])
+                note = "" if k == 0 and start == 0 else (
+                    f"env {k}'s episode from agent step {start} (seed {seed}), the first of "
+                    f"{n} envs' episodes to reach concept 2")
+                return Showcase(k, start, n, note)
+    return Showcase(action_batch=n, note=f"no episode of {n} envs (seed {seed}) reached "
+                                         f"concept 2 within {steps} steps in {budget} agent steps")
 
 
 def _moments(frames, count: int):
@@ -118,18 +194,27 @@ def _caption(f) -> str:
     return ", ".join(bits)
 
 
-def contact_sheet(game: str, name: str, config: Config, path: Path, *, steps: int = 200,
-                  moments: int = 4, seed: int = 0, progress: bool = False) -> Path:
-    """A PNG: columns are moments of one run, the top row the 3.1 twin, the bottom the preset."""
+def contact_sheet(game: str, name: str, config: Config, path: Path, *,
+                  steps: int | None = None, moments: int = 4, seed: int = 0,
+                  progress: bool = False) -> Path:
+    """A PNG: columns are moments of one run, the top row the 3.1 twin, the bottom the preset.
+    ``steps``: agent steps to play at most (default 200, a 2.2 preset's T + 100 if longer); a
+    2.2 preset follows an env whose episode reaches concept 2 (see :func:`drift_showcase`)."""
     Image, ImageDraw = _pil()
-    frames = twin_run(game, config, steps, seed, progress=f"{game} {name}" if progress else None)
+    steps = default_steps(config) if steps is None else steps
+    showcase = drift_showcase(game, config, steps, seed)
+    note = showcase.note
+    frames = twin_run(game, config, steps, seed, progress=f"{game} {name}" if progress else None,
+                      showcase=showcase)
     columns = [frames[i] for i in _moments(frames, moments)]
-    w, h, pad, top, title = 160, 210, 6, 16, 36
+    w, h, pad, top, title = 160, 210, 6, 16, 50 if note else 36
     sheet = Image.new("RGB", (len(columns) * (w + pad) + pad, title + 2 * (h + top + pad)),
                       (24, 24, 24))
     draw = ImageDraw.Draw(sheet)
     draw.text((pad, 4), f"{game} {name}   (top: 3.1 twin, bottom: {name})", fill=(230, 230, 230))
     draw.text((pad, 18), config.describe(), fill=(180, 180, 180))
+    if note:
+        draw.text((pad, 32), note, fill=(180, 180, 180))
     for c, f in enumerate(columns):
         x = pad + c * (w + pad)
         for r, key in enumerate(("twin", "preset")):
@@ -142,11 +227,14 @@ def contact_sheet(game: str, name: str, config: Config, path: Path, *, steps: in
 
 def record_episode(game: str, name: str, config: Config, path: Path, *, max_steps: int = 1000,
                    seed: int = 0, progress: bool = False) -> Path:
-    """An animated GIF of one episode of the preset, with a line per step of what happened."""
+    """An animated GIF of one episode of the preset, with a line per step of what happened (a
+    2.2 preset: of an env whose episode reaches concept 2, see :func:`drift_showcase`)."""
     Image, ImageDraw = _pil()
+    showcase = drift_showcase(game, config, max_steps, seed)
+    note = showcase.note
     frames = twin_run(game, config, max_steps, seed, with_twin=False,
-                      progress=f"{game} {name}" if progress else None)
-    w, h, bar = 160 * SCALE, 210 * SCALE, 40
+                      progress=f"{game} {name}" if progress else None, showcase=showcase)
+    w, h, bar = 160 * SCALE, 210 * SCALE, 56 if note else 40
     images = []
     for f in frames:
         img = Image.new("RGB", (w, h + bar), (0, 0, 0))
@@ -156,6 +244,8 @@ def record_episode(game: str, name: str, config: Config, path: Path, *, max_step
         if f["action"] is not None:
             draw.text((4, 20), f"intended {f['action']}  executed {f['executed']}",
                       fill=(200, 200, 200))
+        if note:
+            draw.text((4, 38), note, fill=(200, 200, 200))
         images.append(img)
     return _save_whole(path, lambda tmp: images[0].save(
         tmp, save_all=True, append_images=images[1:], duration=50, loop=0,

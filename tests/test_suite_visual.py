@@ -354,3 +354,101 @@ def test_a_contact_sheets_top_row_is_the_twin_and_its_bottom_row_the_preset(tmp_
     np.testing.assert_array_equal(upper, screen)
     hidden = (lower != screen).any(axis=-1)
     assert hidden.any() and len(np.unique(lower[hidden], axis=0)) == 1  # one fill colour
+
+
+def _episodes(game, config, seed, num_envs, steps):
+    """Every episode of ``num_envs`` envs of ``seed`` playing twin_run's random actions for
+    ``steps`` agent steps (autoreset off: the step after an end resets): (env, start, length)."""
+    rng = np.random.default_rng(seed)
+    started, episodes = [0] * num_envs, []
+    with stori_jax.make(game, config=config, num_envs=num_envs, seed=seed, obs="raw",
+                        num_workers=1, autoreset=False) as env:
+        env.reset()
+        for t in range(1, steps + 1):
+            _, _, terminated, truncated, _ = env.step(
+                rng.integers(env.num_actions, size=num_envs).astype(np.int32))
+            for i in np.flatnonzero(np.asarray(terminated | truncated)):
+                episodes.append((int(i), started[i], t - started[i]))
+                started[i] = t + 1
+    return episodes
+
+
+SUDDEN_BLACKOUT_AT_220 = stori_jax.Config(drift=stori_jax.ConceptDrift(
+    "sudden", 220, stori_jax.Config(observation=stori_jax.ObservationMask("blackout", 10, 1.0))))
+
+
+def test_a_drift_picture_follows_the_first_episode_that_reaches_concept_2(monkeypatch):
+    """A random policy's Breakout episode mostly ends before a 2.2 switch (T = 300): the picture
+    follows the first episode of the seed's candidate envs that lasts past T (found here from
+    the episodes' lengths alone), from its first screen, and shows concept 2 from step T + 1."""
+    import stori_jax.visual as visual
+
+    monkeypatch.setattr(visual, "DRIFT_CANDIDATES", 4)
+    config, period, steps, seed = SUDDEN_BLACKOUT_AT_220, 220, 230, 1
+    showcase = visual.drift_showcase("Breakout", config, steps, seed)
+    # the earliest step at which an episode is in its step T + 1; the lowest env on a tie
+    reached = sorted((start + period, i, start)
+                     for i, start, length in _episodes("Breakout", config, seed, 4, 700)
+                     if length > period)
+    _, env_index, start = reached[0]
+    assert start > 0, "the case should need a later episode than the first"
+    assert showcase == visual.Showcase(
+        env_index, start, 4, f"env {env_index}'s episode from agent step {start} (seed {seed}), "
+                             "the first of 4 envs' episodes to reach concept 2")
+    frames = visual.twin_run("Breakout", config, steps, seed, showcase=showcase)
+    assert [f["step"] for f in frames] == list(range(steps + 1))
+    (first_screen,), _ = _replay("Breakout", None, [])
+    np.testing.assert_array_equal(frames[0]["preset"], first_screen)  # a new episode's first
+    assert [f["concept"] for f in frames] == [int(f["step"] > period) for f in frames]
+    for f in frames:  # concept 1 is the 3.1 twin; concept 2 a mask on the same game
+        assert f["masked"] == bool(f["concept"])
+        if not f["concept"]:
+            np.testing.assert_array_equal(f["preset"], f["twin"], err_msg=f"step {f['step']}")
+
+
+def test_a_drift_picture_that_cannot_show_concept_2_says_why(monkeypatch, tmp_path):
+    import stori_jax.visual as visual
+
+    config = SUDDEN_BLACKOUT_AT_220
+    assert visual.drift_showcase("Breakout", config, 220) == visual.Showcase(
+        note="concept 2 begins after agent step 220 of an episode: not shown")
+    assert visual.drift_showcase("Breakout", stori_jax.Config(), 50) == visual.Showcase()
+    monkeypatch.setattr(visual, "DRIFT_CANDIDATES", 1)
+    monkeypatch.setattr(visual, "DRIFT_SEARCH", 1)
+    # seed 0's env 0 plays a 200-odd-step first episode: none reaches step 221 within 230 steps
+    assert max(length for _, _, length in _episodes("Breakout", config, 0, 1, 230)) <= 220
+    assert visual.drift_showcase("Breakout", config, 230) == visual.Showcase(
+        0, 0, 1, "no episode of 1 envs (seed 0) reached concept 2 within 230 steps in 230 "
+                 "agent steps")
+    # the note is a third line of the sheet's title: the screens move down 14 px
+    path = visual.contact_sheet("Breakout", "mine", config, tmp_path / "sheet.png", steps=230)
+    sheet = np.asarray(Image.open(path).convert("RGB"))
+    assert sheet.shape[0] == 50 + 2 * (16 + 210 + 6)
+    (first_screen,), _ = _replay("Breakout", None, [])
+    np.testing.assert_array_equal(sheet[50 + 16:50 + 16 + 210, 6:166], first_screen)
+
+
+def test_a_drift_picture_plays_long_enough_to_reach_concept_2(monkeypatch, tmp_path):
+    """By default (a --steps given is played as given)."""
+    import stori_jax.visual as visual
+
+    played = []
+
+    def twin_run(game, config, steps, seed, **kw):
+        played.append((steps, kw["showcase"]))
+        return [dict(step=0, preset=np.zeros((210, 160, 3), np.uint8),
+                     twin=np.zeros((210, 160, 3), np.uint8), corrupted=False, event=0,
+                     concept=0, masked=False, action=None, executed=None)]
+
+    monkeypatch.setattr(visual, "twin_run", twin_run)
+    monkeypatch.setattr(visual, "drift_showcase", lambda game, config, steps, seed: (
+        visual.Showcase(note=f"{steps}")))
+    gopher = stori_jax.preset("Gopher", "2.2")  # cyclic, T = 600
+    short = stori_jax.Config(drift=stori_jax.ConceptDrift("cyclic", 50, stori_jax.preset(
+        "Breakout", "3.2A")))
+    for config, steps, expected in ((stori_jax.Config(), None, visual.SHEET_STEPS),
+                                    (gopher, None, 600 + visual.AFTER_SWITCH), (gopher, 5, 5),
+                                    (short, None, visual.SHEET_STEPS)):
+        visual.contact_sheet("Gopher", "x", config, tmp_path / "x.png", steps=steps)
+        assert played[-1] == (expected, visual.Showcase(note=f"{expected}"))
+    assert visual.SHEET_STEPS == 200 and visual.AFTER_SWITCH == 100
