@@ -99,7 +99,14 @@ def unless_traced(check, name: str, value: Any, *bounds):
 def check_actions(actions, num_envs: int, num_actions: int):
     """A batch of actions checked on the host: shape (num_envs,), an integer dtype, values in
     [0, num_actions); returned as int32 numpy."""
+    import jax
+
     expected = f"shape ({num_envs},) of ints in [0, {num_actions - 1}]"
+    if isinstance(actions, jax.core.Tracer):
+        raise ValueError("actions are traced: env.step / env.send cannot run inside jax.jit, "
+                         "vmap or lax.scan (they step emulator processes from the host); "
+                         "inside a traced function step through env.xla() (README, 'Stepping "
+                         "inside jax.jit')")
     try:
         a = np.asarray(actions)
     except Exception as e:  # noqa: BLE001 - anything not array-like

@@ -64,7 +64,7 @@ def _cmd_run(args) -> int:
     print(f"events fired      : {stats['events_fired']}")
     print(f"corrupted actions : {stats['corrupted_actions']} of {stats['action_draws']} "
           f"({stats['corrupted_fraction']:.2f}; one draw per emulator frame at frame "
-          "granularity)")
+          "granularity; a replacement may be the intended action itself)")
     print(f"concept switches  : {stats['concept_switches']}")
     print(f"masked obs        : {stats['masked_obs']} of {env_steps}")
     print(f"env steps / s     : {stats['env_steps_per_s']:.0f} ({env_steps} steps in "

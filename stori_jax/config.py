@@ -64,6 +64,9 @@ class ActionNoise:
                                   or a < 0 for a in actions):
                 raise ValueError("ActionNoise.replacement_actions must be a non-empty tuple of "
                                  f"action indices >= 0 (or None), got {self.replacement_actions!r}")
+            if len(set(actions)) < len(actions):  # a repeat would weigh the uniform draw
+                raise ValueError("ActionNoise.replacement_actions must name each action once, "
+                                 f"got {self.replacement_actions!r}")
             if self.sticky:
                 raise ValueError("ActionNoise.replacement_actions cannot be combined with "
                                  "sticky=True (sticky repeats the previous action)")

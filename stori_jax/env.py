@@ -133,7 +133,11 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
                              f"inline_envs None or set it to {num_envs}, got {inline_envs!r}")
         inline_envs = num_envs
     elif inline_envs is not None:  # every worker needs at least one env
-        inline_envs = check_int("inline_envs", inline_envs, 0, num_envs - 1)
+        inline_envs = check_int("inline_envs", inline_envs)
+        if not 0 <= inline_envs < num_envs:
+            raise ValueError(f"inline_envs must be in [0, num_envs - 1 = {num_envs - 1}] with "
+                             "worker processes (each needs an env; num_workers=0 emulates all "
+                             f"{num_envs} here), got {inline_envs}")
     if num_workers is None:
         num_workers, default_inline = default_split(num_envs, _available_cores())
         if inline_envs is None:

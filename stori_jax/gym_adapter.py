@@ -106,9 +106,10 @@ class _Owner:
                              "use `stori-jax record` for videos")
         for name in ("num_envs", "autoreset"):
             if name in make_kwargs:
-                raise ValueError(f"{name} is set by the gymnasium adapter (one env without "
-                                 "autoreset; gymnasium.make_vec(id, num_envs=N) for a batch "
-                                 f"with next-step autoreset), got {name}={make_kwargs[name]!r}")
+                raise ValueError(f"{name} is set by the gymnasium adapter (one env, whose "
+                                 "step after an episode's end starts the next one; "
+                                 "gymnasium.make_vec(id, num_envs=N) for a batch), got "
+                                 f"{name}={make_kwargs[name]!r}")
         self._make = lambda s: stori_jax.make(game, preset, num_envs=num_envs, seed=s,
                                               autoreset=False, **make_kwargs)
         # an int: gymnasium takes no numpy seed

@@ -29,14 +29,15 @@ def _save_whole(path: Path, save) -> Path:
     """``save(tmp)`` beside ``path``, then renamed to it: an interrupted write (Ctrl-C while a
     long GIF is encoded) leaves no half-written file and an earlier one as it was."""
     import os
-    import tempfile
+    import secrets
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    # the same extension, from which Pillow takes the format
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.partial.",
-                               suffix=path.suffix)
-    os.close(fd)
+    # a name no other writer picks, with the same extension (from which Pillow takes the
+    # format); created by ``save`` as any file is (permissions after the umask: mkstemp's
+    # would be 0600)
+    tmp = path.with_name(f".{path.stem}.partial.{os.getpid()}.{secrets.token_hex(6)}"
+                         f"{path.suffix}")
     try:
         save(tmp)
         os.replace(tmp, path)

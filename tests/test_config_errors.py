@@ -179,6 +179,14 @@ def test_a_huge_probability_or_a_non_sequence_of_actions_is_a_clear_error():
         ActionNoise(0.3, replacement_actions=3)
 
 
+def test_a_replacement_action_named_twice_is_refused():
+    """A repeat would weigh the uniform draw (0 twice as often as 1 below)."""
+    with pytest.raises(ValueError, match=r"ActionNoise\.replacement_actions must name each "
+                                         r"action once, got \(0, 0, 1\)"):
+        ActionNoise(0.3, replacement_actions=(0, 0, 1))
+    assert ActionNoise(0.3, replacement_actions=[1, 0]).replacement_actions == (1, 0)
+
+
 # -- concept drift -----------------------------------------------------------------------------
 
 SECONDARY_OK = Config(action_noise=ActionNoise(0.3))

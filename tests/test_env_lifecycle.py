@@ -464,6 +464,20 @@ def test_valid_actions_of_any_integer_kind_are_accepted(breakout):
                                       np.asarray(actions))
 
 
+def test_stepping_inside_jit_points_to_xla(breakout):
+    """A traced batch of actions (env.step inside jax.jit) is named as such, not as a batch of
+    the wrong shape; the env goes on."""
+    import jax
+    import jax.numpy as jnp
+
+    actions = jnp.zeros(breakout.num_envs, jnp.int32)
+    for call in (breakout.step, breakout.send):
+        with pytest.raises(ValueError, match=r"actions are traced: env\.step / env\.send cannot "
+                                             r"run inside jax\.jit.*env\.xla\(\)"):
+            jax.jit(lambda a: call(a)[1])(actions)
+    assert breakout.step(np.asarray(actions))[1].shape == (breakout.num_envs,)
+
+
 def test_a_rejected_action_leaves_the_env_usable(breakout):
     with pytest.raises(ValueError):
         breakout.step([0, 9, 0])
@@ -520,8 +534,12 @@ def test_step_before_reset_and_send_recv_misuse():
      r"or set it to 3, got 1"),
     (dict(game="Breakout", num_envs=2, num_workers=2, inline_envs=1),
      r"num_workers \(2\) \+ inline_envs \(1\) must be <= num_envs \(2\)"),
-    (dict(game="Breakout", num_envs=2, inline_envs=-1), r"inline_envs must be in \[0, 1\], got -1"),
-    (dict(game="Breakout", num_envs=2, inline_envs=2), r"inline_envs must be in \[0, 1\], got 2"),
+    (dict(game="Breakout", num_envs=2, inline_envs=-1),
+     r"inline_envs must be in \[0, num_envs - 1 = 1\] with worker processes \(each needs an env; "
+     r"num_workers=0 emulates all 2 here\), got -1"),
+    (dict(game="Breakout", num_envs=2, inline_envs=2), r"inline_envs must be in \[0, num_envs - 1 = "
+                                                       r"1\] .*, got 2"),
+    (dict(game="Breakout", num_envs=2, inline_envs=1.0), r"inline_envs must be an int, got 1\.0"),
     (dict(game=["Breakout"]), r"game must be a non-empty string, got \['Breakout'\]"),
     (dict(game="Breakout", num_envs=0), r"num_envs must be >= 1"),
     (dict(game="Breakout", granularity="episode"),

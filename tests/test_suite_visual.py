@@ -109,6 +109,22 @@ def test_an_interrupted_picture_leaves_the_earlier_file(tmp_path):
     assert Image.open(path).format == "GIF"
 
 
+@pytest.mark.parametrize("umask", [0o022, 0o077])
+def test_pictures_are_written_as_any_file_is(tmp_path, umask):
+    """With the umask's permissions (mkstemp's temporary file made every picture 0600)."""
+    import os
+
+    from stori_jax.visual import _save_whole
+
+    old = os.umask(umask)
+    try:
+        path = _save_whole(tmp_path / "sheet.png", lambda tmp: Image.new("RGB", (2, 2)).save(tmp))
+    finally:
+        os.umask(old)
+    assert path.stat().st_mode & 0o777 == 0o666 & ~umask
+    assert [p.name for p in tmp_path.iterdir()] == ["sheet.png"]
+
+
 def test_pictures_end_on_the_episodes_last_screen():
     """The step that ends an episode showed the next episode's first screen (autoreset):
     Breakout's last frame read score 000 and 5 lives again."""
