@@ -84,8 +84,13 @@ def check_real(name: str, value: Any, minimum: float | None = None,
 
 
 def check_probability(name: str, value: Any) -> float:
-    """``value`` as a float in [0, 1]."""
-    return check_real(name, value, 0, 1)
+    """``value`` as a float in [0, 1].  A float32 (numpy or JAX, the precision the draws use)
+    becomes the shortest decimal of its value (np.float32(0.3) -> 0.3, not 0.30000001192...),
+    so that it plays, prints, records and compares as the same config written as a literal."""
+    prob = check_real(name, value, 0, 1)
+    if getattr(getattr(value, "dtype", None), "name", None) == "float32":
+        prob = float(np.format_float_positional(np.float32(prob), unique=True))
+    return prob
 
 
 def unless_traced(check, name: str, value: Any, *bounds):

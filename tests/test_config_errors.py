@@ -179,6 +179,20 @@ def test_a_huge_probability_or_a_non_sequence_of_actions_is_a_clear_error():
         ActionNoise(0.3, replacement_actions=3)
 
 
+def test_a_float32_probability_is_the_config_written_as_a_literal():
+    """np.float32(0.3) plays as 0.3 does (the draws compare float32s); it was recorded as
+    0.30000001192092896, so a snapshot of one refused to restore into the other."""
+    import jax.numpy as jnp
+
+    for value in (np.float32(0.3), jnp.float32(0.3), np.array(0.3, np.float32)):
+        assert ActionNoise(value) == ActionNoise(0.3) and ActionNoise(value).prob == 0.3
+        assert ObservationMask("crop", 1, value).prob == 0.3
+        assert RandomEvent(1, value).prob == 0.3
+    assert ActionNoise(np.float32(1e-8)).prob == 1e-8 and ActionNoise(np.float32(1.0)).prob == 1.0
+    assert ActionNoise(np.float16(0.3)).prob == float(np.float16(0.3))  # exact: 0.2998046875
+    assert ActionNoise(np.float64(0.1 + 0.2)).prob == 0.1 + 0.2  # float64: as given
+
+
 def test_a_replacement_action_named_twice_is_refused():
     """A repeat would weigh the uniform draw (0 twice as often as 1 below)."""
     with pytest.raises(ValueError, match=r"ActionNoise\.replacement_actions must name each "
