@@ -132,7 +132,8 @@ def default_steps(config: Config) -> int:
     return max(SHEET_STEPS, config.drift.period + AFTER_SWITCH)
 
 
-def drift_showcase(game: str, config: Config, steps: int, seed: int = 0) -> Showcase:
+def drift_showcase(game: str, config: Config, steps: int, seed: int = 0, *,
+                   progress: str | None = None) -> Showcase:
     """Which episode a picture of ``config`` follows (for :func:`twin_run`).
 
     A 2.2 preset switches concept at agent step T of an episode, and a random policy's episode
@@ -140,24 +141,29 @@ def drift_showcase(game: str, config: Config, steps: int, seed: int = 0) -> Show
     first episode would show concept 1 only.  So a 2.2 picture looks through the episodes of
     DRIFT_CANDIDATES envs of the seed (playing the random actions ``twin_run`` draws) for the
     first that reaches concept 2 within ``steps`` steps, for DRIFT_SEARCH x ``steps`` agent
-    steps at most, and follows it (env 0's first episode if none does; the note says so)."""
+    steps at most, and follows it (env 0's first episode if none does; the note says so).
+    ``progress``: the search's progress bar label (None: no bar)."""
     if config.drift is None:
         return Showcase()
     period = config.drift.period
     if steps <= period:  # concept 2 begins at the episode's agent step T + 1 at the earliest
         return Showcase(note=f"concept 2 begins after agent step {period} of an episode: "
                              "not shown")
+    from tqdm import tqdm
+
     import stori_jax
 
     rng = np.random.default_rng(seed)
     n, budget = DRIFT_CANDIDATES, DRIFT_SEARCH * steps
     with stori_jax.make(game, config=config, num_envs=n, seed=seed, obs="raw", num_workers=1,
-                        autoreset=False) as env:
+                        autoreset=False) as env, \
+            tqdm(total=budget, desc=progress, unit="step", disable=progress is None) as bar:
         env.reset()
         started = np.zeros(n, np.int64)  # the agent step that began each env's episode
         for t in range(1, budget + 1):
             actions = rng.integers(env.num_actions, size=n).astype(np.int32)
             _, _, _, _, info = env.step(actions)
+            bar.update()
             new_episode = np.asarray(info["reset_step"])  # the step after an end resets
             started[new_episode] = t
             reached = ~new_episode & (np.asarray(info["concept"]) > 0) & (t - started <= steps)
@@ -170,6 +176,10 @@ def drift_showcase(game: str, config: Config, steps: int, seed: int = 0) -> Show
                 return Showcase(k, start, n, note)
     return Showcase(action_batch=n, note=f"no episode of {n} envs (seed {seed}) reached "
                                          f"concept 2 within {steps} steps in {budget} agent steps")
+
+
+def _search_label(game: str, name: str, progress: bool) -> str | None:
+    return f"{game} {name}: finding an episode that reaches concept 2" if progress else None
 
 
 def _moments(frames, count: int):
@@ -203,7 +213,8 @@ def contact_sheet(game: str, name: str, config: Config, path: Path, *,
     2.2 preset follows an env whose episode reaches concept 2 (see :func:`drift_showcase`)."""
     Image, ImageDraw = _pil()
     steps = default_steps(config) if steps is None else steps
-    showcase = drift_showcase(game, config, steps, seed)
+    showcase = drift_showcase(game, config, steps, seed, progress=_search_label(game, name,
+                                                                                progress))
     note = showcase.note
     frames = twin_run(game, config, steps, seed, progress=f"{game} {name}" if progress else None,
                       showcase=showcase)
@@ -231,7 +242,8 @@ def record_episode(game: str, name: str, config: Config, path: Path, *, max_step
     """An animated GIF of one episode of the preset, with a line per step of what happened (a
     2.2 preset: of an env whose episode reaches concept 2, see :func:`drift_showcase`)."""
     Image, ImageDraw = _pil()
-    showcase = drift_showcase(game, config, max_steps, seed)
+    showcase = drift_showcase(game, config, max_steps, seed, progress=_search_label(game, name,
+                                                                                    progress))
     note = showcase.note
     frames = twin_run(game, config, max_steps, seed, with_twin=False,
                       progress=f"{game} {name}" if progress else None, showcase=showcase)

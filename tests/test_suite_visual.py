@@ -457,7 +457,7 @@ def test_a_drift_picture_plays_long_enough_to_reach_concept_2(monkeypatch, tmp_p
                      concept=0, masked=False, action=None, executed=None)]
 
     monkeypatch.setattr(visual, "twin_run", twin_run)
-    monkeypatch.setattr(visual, "drift_showcase", lambda game, config, steps, seed: (
+    monkeypatch.setattr(visual, "drift_showcase", lambda game, config, steps, seed, **kw: (
         visual.Showcase(note=f"{steps}")))
     gopher = stori_jax.preset("Gopher", "2.2")  # cyclic, T = 600
     short = stori_jax.Config(drift=stori_jax.ConceptDrift("cyclic", 50, stori_jax.preset(
