@@ -29,6 +29,8 @@ def add_parsers(sub) -> None:
     train.add_argument("--eval-episodes", type=int, default=0,
                        help="evaluate the final policy for this many episodes (default 0: "
                             "not now; stori-jax eval does it later)")
+    train.add_argument("--force", action="store_true",
+                       help="with --eval-episodes: replace an existing eval-sampled.json")
     train.add_argument("--quiet", action="store_true", help="no progress bar")
 
     ev = sub.add_parser("eval", help="the evaluation protocol: N episodes of a checkpoint's "
@@ -90,8 +92,16 @@ def run_dir(root: Path, game: str, preset: str, agent: str, seed: int) -> Path:
 DEFAULT_ROOT = Path("results") / "train"
 
 
+def check_no_result(path: Path, force: bool):
+    """An earlier evaluation is replaced only with --force (one may have cost an hour)."""
+    if path.exists() and not force:
+        raise ValueError(f"{path} already holds an evaluation: pass --force to replace it, "
+                         "or another --out")
+
+
 def cmd_train(args) -> int:
-    from baselines.evaluate import EVAL_SEED_OFFSET, check_eval_seed, evaluate, write_result
+    from baselines.evaluate import (EVAL_SEED_OFFSET, check_eval_seed, evaluate, result_path,
+                                    write_result)
     from baselines.ppo import PPOConfig, train
     from stori_jax.checks import check_int
     from stori_jax.cli import check_out
@@ -123,10 +133,13 @@ def cmd_train(args) -> int:
     if args.resume and not (out / "checkpoint.pkl").exists():
         raise ValueError(f"--resume: {out} holds no checkpoint.pkl (a run stopped before its "
                          "first checkpoint has nothing to continue): run without --resume")
+    if args.force and not args.eval_episodes:
+        raise ValueError("--force replaces an evaluation: it needs --eval-episodes")
     if args.eval_episodes:  # checked before training, not after it
         check_eval_seed(config.seed, config.seed + EVAL_SEED_OFFSET,
                         "train without --eval-episodes, then run stori-jax eval --checkpoint "
                         f"{out}/checkpoint.pkl --eval-seed S")
+        check_no_result(result_path(out, "sampled"), args.force)
     trained = config.num_iterations * config.batch_size
     if trained != config.total_steps:
         print(f"stori-jax: --steps {config.total_steps} rounds up to {trained} agent steps, whole "
@@ -144,7 +157,7 @@ def cmd_train(args) -> int:
     else:
         print(f"trained {summary['agent_steps']} agent steps in "
               f"{summary['train_seconds']:.0f} s ({summary['train_sps']:.0f} steps/s); wrote "
-              f"{out}/log.csv, episodes.csv, checkpoint.pkl, summary.json")
+              f"{out}/config.json, log.csv, episodes.csv, checkpoint.pkl, summary.json")
     if args.eval_episodes:
         result = evaluate(config.game, config.preset, policy="sampled", seed=config.seed,
                           episodes=args.eval_episodes, checkpoint=out / "checkpoint.pkl",
@@ -157,7 +170,8 @@ def cmd_train(args) -> int:
 
 def cmd_eval(args) -> int:
     import stori_jax
-    from baselines.evaluate import EVAL_SEED_OFFSET, evaluate, stori_game, write_result
+    from baselines.evaluate import (EVAL_SEED_OFFSET, evaluate, result_path, stori_game,
+                                    write_result)
     from baselines.ppo import load_checkpoint
     from stori_jax.checks import MAX_INT32, MAX_SEED, check_int
     from stori_jax.cli import check_out
@@ -203,10 +217,7 @@ def cmd_eval(args) -> int:
         seed = config["seed"]
         out, checkpoint = args.out or args.checkpoint.parent, args.checkpoint
     check_out("--out", out, directory=True)
-    existing = Path(out) / f"eval-{policy}.json"
-    if existing.exists() and not args.force:
-        raise ValueError(f"{existing} already holds an evaluation: pass --force to replace it, "
-                         "or another --out")
+    check_no_result(result_path(out, policy), args.force)
     if args.eval_seed is None:  # the default eval seed must be a valid seed too
         check_int("--seed + 10000 (the default --eval-seed)", seed + EVAL_SEED_OFFSET, 0,
                   MAX_SEED)

@@ -141,10 +141,15 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100,
                 software=made_with)
 
 
+def result_path(out_dir: Path, policy: str) -> Path:
+    """Where an evaluation of ``policy`` is filed: ``out_dir``/eval-<policy>.json."""
+    return Path(out_dir) / f"eval-{policy}.json"
+
+
 def write_result(result: dict, out_dir: Path) -> Path:
     """``out_dir``/eval-<policy>.json, the file ``stori-jax table`` collects."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    path = out_dir / f"eval-{result['policy']}.json"
+    path = result_path(out_dir, result["policy"])
     path.write_text(json.dumps(result, indent=1))
     return path

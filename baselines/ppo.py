@@ -537,7 +537,7 @@ def _software_parts(ckpt: dict, start: int, made_with: dict, path: Path) -> list
                     for name, version in before.get("packages", {}).items()
                     if version != made_with["packages"].get(name)]
         warnings.warn(f"--resume: {path} was trained so far with other software "
-                      f"({'; '.join(changed)}): from iteration {start} on, the run will not "
+                      f"({'; '.join(changed)}): from iteration {start} on, the run may not "
                       "match an uninterrupted one bit for bit", stacklevel=3)
     return parts + [dict(from_iteration=start, software=made_with)]
 
@@ -558,6 +558,8 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     ckpt_path, log_path, ep_path = out / "checkpoint.pkl", out / "log.csv", out / "episodes.csv"
+    last = config.num_iterations if stop_after is None else min(stop_after,
+                                                                config.num_iterations)
     envs = make_envs(config)
     try:
         network = make_network(config, envs[0].num_actions)
@@ -581,6 +583,10 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
             if stop_after is not None and stop_after < start:
                 raise ValueError(f"stop_after {stop_after} is before {ckpt_path}'s iteration "
                                  f"{start}: a run cannot go back")
+            if start == last:  # nothing to train: every file stays as it is
+                parts = ckpt.get("software_parts", [dict(from_iteration=0, software=None)])
+                return _summary(config, start, ckpt["elapsed_s"], parts[-1]["software"], parts,
+                                iterations_now=0)
             software_parts = _software_parts(ckpt, start, made_with, ckpt_path)
             for env, snap in zip(envs, ckpt["envs"]):
                 env.restore(snap)
@@ -599,8 +605,6 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
             (out / "config.json").write_text(json.dumps(dataclasses.asdict(config), indent=1))
             _rewrite_csv(log_path, LOG_FIELDS, [])
             _rewrite_csv(ep_path, EPISODE_FIELDS, [])
-        last = config.num_iterations if stop_after is None else min(stop_after,
-                                                                    config.num_iterations)
         bar = tqdm(total=config.num_iterations * config.batch_size, initial=start
                    * config.batch_size, unit="step", disable=not progress,
                    desc=f"ppo {config.game} {config.preset} seed {config.seed}")
@@ -645,14 +649,20 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
     finally:
         for env in envs:
             env.close()
-    summary = dict(config=dataclasses.asdict(config), iterations_done=last,
-                   finished=last == config.num_iterations,
-                   agent_steps=last * config.batch_size, train_seconds=elapsed,
-                   train_sps=last * config.batch_size / max(elapsed, 1e-9), software=made_with,
-                   software_parts=software_parts)
+    summary = _summary(config, last, elapsed, made_with, software_parts)
     if summary["finished"]:
         (out / "summary.json").write_text(json.dumps(summary, indent=1))
-    return dict(summary, iterations_now=last - start)  # 0: a resumed run had finished
+    return dict(summary, iterations_now=last - start)
+
+
+def _summary(config: PPOConfig, iterations: int, elapsed: float, made_with: dict,
+             software_parts: list, **extra) -> dict:
+    """summary.json's content for a run trained ``iterations`` in ``elapsed`` seconds."""
+    return dict(config=dataclasses.asdict(config), iterations_done=iterations,
+                finished=iterations == config.num_iterations,
+                agent_steps=iterations * config.batch_size, train_seconds=elapsed,
+                train_sps=iterations * config.batch_size / max(elapsed, 1e-9),
+                software=made_with, software_parts=software_parts, **extra)
 
 
 def env_only_sps(config: PPOConfig, agent_steps: int = 2048) -> float:

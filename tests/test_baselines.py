@@ -440,6 +440,20 @@ def test_resuming_a_finished_run_says_there_is_nothing_to_train(uninterrupted, c
     assert read_log(full) == log
 
 
+def test_resuming_a_finished_run_touches_no_file(uninterrupted, monkeypatch):
+    """With other software it warned that the run 'will not match' from its last iteration on,
+    and rewrote summary.json with that software as a part of the run, though nothing trained."""
+    full, summary = uninterrupted
+    files = {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in full.iterdir()}
+    later = dict(summary["software"], commit="0" * 40)
+    monkeypatch.setattr(ppo, "software", lambda: later)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        again = ppo.train(tiny(), full, progress=False, resume=True)
+    assert {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in full.iterdir()} == files
+    assert again == dict(summary, iterations_now=0)
+
+
 def test_same_seed_same_updates_other_seed_others(uninterrupted, tmp_path):
     full, _ = uninterrupted
     ppo.train(tiny(), tmp_path / "same", progress=False, stop_after=1)
@@ -1203,3 +1217,17 @@ def test_cli_train_evaluates_the_sampled_policy_of_its_checkpoint(tmp_path, monk
                           checkpoint=tmp_path / "checkpoint.pkl", progress=False)]
     assert json.loads((tmp_path / "eval-sampled.json").read_text())["policy"] == "sampled"
     assert "eval: mean return 1.00 over 3 episodes" in capsys.readouterr().out
+    # a second evaluation replaces the first only with --force, and that is known before training
+    (tmp_path / "checkpoint.pkl").write_bytes(b"")  # a run to --resume
+    again = ["train", "ppo", "--game", "boxing", "--preset", "3.2b", "--seed", "4", "--steps",
+             "64", "--eval-episodes", "2", "--out", str(tmp_path), "--resume", "--quiet"]
+    monkeypatch.setattr(ppo, "train", lambda *a, **k: pytest.fail("trained before refusing"))
+    assert main(again) == 2
+    assert f"{tmp_path / 'eval-sampled.json'} already holds an evaluation: pass --force" in \
+        capsys.readouterr().err
+    assert json.loads((tmp_path / "eval-sampled.json").read_text())["episodes"] == 3
+    monkeypatch.setattr(ppo, "train", train)
+    assert main(again + ["--force"]) == 0
+    assert json.loads((tmp_path / "eval-sampled.json").read_text())["episodes"] == 2
+    assert main(again[:-6] + ["--out", str(tmp_path), "--resume", "--force"]) == 2
+    assert "--force replaces an evaluation: it needs --eval-episodes" in capsys.readouterr().err
