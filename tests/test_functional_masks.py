@@ -7,6 +7,7 @@ the spec, painted per pixel with inclusive bounds), independently of the library
 from __future__ import annotations
 
 import functools
+import re
 
 import jax
 import jax.numpy as jnp
@@ -402,3 +403,31 @@ def test_torch_mask_jit_and_vmap():
         for s in range(2):
             np.testing.assert_array_equal(out[b, s], torch_reference(*np.asarray(centres[b, s])))
     np.testing.assert_array_equal(np.asarray(torch_mask(centres)), out)  # batched directly
+
+
+def test_apply_masks_takes_a_static_region_or_the_torch_not_neither_or_both():
+    frames, apply = jnp.zeros((1, 2, 210, 160, 3), jnp.uint8), jnp.ones((1, 2), bool)
+    hidden, fill = np.zeros((210, 160), bool), np.zeros(3, np.uint8)
+    centres = jnp.zeros((1, 2, 2), jnp.int32)
+    for kwargs, given in ((dict(), "hidden=None, fill=None, centres=None"),
+                          (dict(hidden=hidden), "hidden=..., fill=None, centres=None"),
+                          (dict(hidden=hidden, fill=fill, centres=centres),
+                           "hidden=..., fill=..., centres=..."),
+                          (dict(fill=fill, centres=centres), "hidden=None, fill=..., centres=...")):
+        with pytest.raises(ValueError, match=r"apply_masks takes either hidden= and fill= \(a "
+                                             r"static region\) or centres= \(the torch\), got "
+                                             + re.escape(given)):
+            apply_masks(frames, apply, **kwargs)
+
+
+def test_extract_labels_takes_a_game_name_or_its_spec():
+    from stori_jax.functional import extract_labels
+
+    ram = np.arange(128, dtype=np.uint8)[None]
+    by_name = extract_labels("breakout", ram)
+    by_spec = extract_labels(get_game("Breakout"), ram)
+    assert by_name.keys() == by_spec.keys() and by_name
+    for name in by_name:
+        np.testing.assert_array_equal(by_name[name], by_spec[name])
+    with pytest.raises(ValueError, match="NoSuchGame"):
+        extract_labels("NoSuchGame", ram)

@@ -56,6 +56,13 @@ def apply_masks(frames: jax.Array, apply: jax.Array, *, hidden: np.ndarray | Non
                 fill: np.ndarray | None = None, centres: jax.Array | None = None) -> jax.Array:
     """Mask frames (B, 2, 210, 160, 3) where ``apply`` (B, 2): either the static ``hidden``
     region with ``fill``, or the torch at ``centres`` (B, 2, 2) (everything outside black)."""
+    given = [value is not None for value in (hidden, fill, centres)]
+    if given not in ([True, True, False], [False, False, True]):
+        raise ValueError("apply_masks takes either hidden= and fill= (a static region) or "
+                         "centres= (the torch), got "
+                         + ", ".join(f"{name}={'None' if value is None else '...'}" for name, value
+                                     in (("hidden", hidden), ("fill", fill),
+                                         ("centres", centres))))
     if centres is not None:
         pixel_hidden = torch_mask(centres) & apply[:, :, None, None]
         return jnp.where(pixel_hidden[..., None], jnp.uint8(0), frames)
