@@ -1,5 +1,6 @@
-"""Argument checks shared by the benchmark scripts: a bad value is a one-line usage error that
-names the option, never a traceback from inside a measurement."""
+"""Argument handling shared by the benchmark scripts: checks (a bad value is a one-line usage
+error that names the option, never a traceback from inside a measurement), and the part of a
+results file's name that says which options differ from their defaults."""
 
 from __future__ import annotations
 
@@ -13,6 +14,22 @@ def require_at_least_one(parser: argparse.ArgumentParser, **options) -> None:
         values = value if isinstance(value, list) else [value]
         if value is not None and min(values) < 1:
             parser.error(f"--{name.replace('_', '-')}: must be >= 1, got {value}")
+
+
+def options_in_name(parser: argparse.ArgumentParser, args, prefixes: dict[str, str]) -> str:
+    """'-<prefix><value>' for every option in ``prefixes`` (its dest -> its prefix in a file
+    name) that differs from its default, lists joined by '-' (``--sizes 8 32``: '-B8-32'): a run
+    with other options never overwrites a default run of the same day, nor one with others."""
+    def shown(value):
+        return f"{value:g}" if isinstance(value, float) else str(value)
+
+    parts = []
+    for name, prefix in prefixes.items():
+        value = getattr(args, name)
+        if value != parser.get_default(name):
+            values = value if isinstance(value, list) else [value]
+            parts.append(prefix + "-".join(shown(v) for v in values))
+    return "".join(f"-{part}" for part in parts)
 
 
 def output_directory(parser: argparse.ArgumentParser, path) -> None:

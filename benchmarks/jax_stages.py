@@ -22,7 +22,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from _checks import output_directory, require_at_least_one  # this folder: on sys.path
+from _checks import (options_in_name, output_directory,  # this folder: on sys.path
+                     require_at_least_one)
 
 HERE = Path(__file__).resolve().parent
 
@@ -125,7 +126,8 @@ def main(argv=None):
                                                   for b in args.sizes) + " |")
     table = "\n".join(lines) + "\n"
     args.out.mkdir(parents=True, exist_ok=True)
-    stem = args.out / f"jax-stages-{meta['date']}-{meta['host']}"
+    stem = args.out / (f"jax-stages-{meta['date']}-{meta['host']}"
+                       + options_in_name(parser, args, {"sizes": "B"}))
     Path(f"{stem}.json").write_text(json.dumps(dict(meta=meta, results=results), indent=1))
     Path(f"{stem}.md").write_text(table)
     print(table)

@@ -22,7 +22,7 @@ import stori_jax
 from baselines import ppo
 from stori_jax.provenance import software
 from baselines.run_evidence import EVIDENCE_HYPERPARAMETERS, GAME_HYPERPARAMETERS
-from _checks import (output_directory, require_at_least_one,  # this folder: on sys.path
+from _checks import (options_in_name, output_directory, require_at_least_one,  # on sys.path
                      stori_game_and_preset)
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -150,7 +150,8 @@ def main(argv=None) -> None:
     text = markdown(config, results)
     print(text)
     day = datetime.date.today().isoformat()
-    stem = f"ppo-rollout-{day}-{game}-{args.preset}-{args.network}"  # dots: no with_suffix
+    stem = f"ppo-rollout-{day}-{game}-{args.preset}-{args.network}" + options_in_name(
+        parser, args, {"repeats": "repeats"})  # a preset has dots: no with_suffix
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / f"{stem}.json").write_text(json.dumps(dict(
         config={**vars(args), "out": str(args.out)},

@@ -38,7 +38,8 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from _checks import output_directory, require_at_least_one, stori_games  # noqa: E402
+from _checks import (options_in_name, output_directory, require_at_least_one,  # noqa: E402
+                     stori_games)
 
 FRAME_SKIP = 4
 WINDOWS = 3  # each rate is the median over this many equal windows (the machine is noisy)
@@ -432,12 +433,9 @@ def name_suffix(parser, args) -> str:
     parts += ["-".join(names) for names in (args.games, args.presets) if names]
     if args.sizes != SWEEP_SIZES[args.quick]:
         parts.append("B" + "-".join(map(str, args.sizes)))
-    for name in ("batch", "workers", "seconds"):
-        if getattr(args, name) != parser.get_default(name):
-            parts.append(f"{name}{getattr(args, name):g}")
-    if args.skip_naive:
-        parts.append("no-naive")
-    return "".join(f"-{part}" for part in parts)
+    return "".join(f"-{part}" for part in parts) + options_in_name(
+        parser, args, {"batch": "batch", "workers": "workers", "seconds": "seconds"}) + (
+        "-no-naive" if args.skip_naive else "")
 
 
 def main(argv=None):
@@ -446,16 +444,22 @@ def main(argv=None):
     parser.add_argument("--quick", action="store_true",
                         help=f"Breakout only, B in {_shown(SWEEP_SIZES[True])} (unless --games / "
                         "--sizes say otherwise)")
-    parser.add_argument("--seconds", type=float, default=3.0, help="measuring time per run")
-    parser.add_argument("--batch", type=int, default=32, help="B for the per-preset runs")
+    parser.add_argument("--seconds", type=float, default=3.0,
+                        help="measuring time per run (default 3.0)")
+    parser.add_argument("--batch", type=int, default=32,
+                        help="B for the per-preset runs (default 32)")
     parser.add_argument("--sizes", type=int, nargs="+", default=None,
                         help=f"B of the Breakout 3.1 sweep (default {_shown(SWEEP_SIZES[False])})")
     parser.add_argument("--games", nargs="+", default=None, help="default: the four STORI games")
     parser.add_argument("--presets", nargs="+", default=None,
                         help="only these presets (e.g. 3.1 2.2); default: all")
-    parser.add_argument("--workers", type=int, default=cores())
-    parser.add_argument("--skip-naive", action="store_true")
-    parser.add_argument("--out", type=Path, default=HERE / "results")
+    parser.add_argument("--workers", type=int, default=cores(),
+                        help="processes of the emulator limit, threads of envpool and ale-py "
+                             f"(default {cores()}: the cores)")
+    parser.add_argument("--skip-naive", action="store_true",
+                        help="leave out the naive gymnasium baseline")
+    parser.add_argument("--out", type=Path, default=HERE / "results",
+                        help="directory for the results (default benchmarks/results)")
     args = parser.parse_args(argv)
     _check_arguments(parser, args)
     if args.sizes is None:

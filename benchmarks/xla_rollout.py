@@ -22,7 +22,7 @@ from tqdm import tqdm
 import stori_jax
 from baselines import ppo
 from stori_jax.provenance import software
-from _checks import (output_directory, require_at_least_one,  # this folder: on sys.path
+from _checks import (options_in_name, output_directory, require_at_least_one,  # on sys.path
                      stori_game_and_preset)
 from ppo_rollout import median_rate, plot
 
@@ -99,7 +99,8 @@ def main(argv=None) -> None:
     text = markdown(args.game, args.preset, args.steps, rows)
     print(text)
     day = datetime.date.today().isoformat()
-    stem = f"xla-rollout-{day}-{args.game}-{args.preset}"  # a preset has dots: no with_suffix
+    stem = f"xla-rollout-{day}-{args.game}-{args.preset}" + options_in_name(  # dots: no
+        parser, args, {"sizes": "B", "steps": "steps", "repeats": "repeats"})  # with_suffix
     path = {ext: args.out / f"{stem}.{ext}" for ext in ("json", "md", "png")}
     args.out.mkdir(parents=True, exist_ok=True)
     path["json"].write_text(json.dumps(dict(

@@ -4,6 +4,7 @@ a markdown table whose columns say what they hold, PNG plots).  The naive baseli
 stori-jax's concept-drift schedule and masks."""
 
 import argparse
+import datetime
 import importlib
 import json
 from collections import Counter
@@ -765,3 +766,37 @@ def test_the_sequential_rollout_chooses_then_steps_every_step(monkeypatch):
                                          jax.random.PRNGKey(0), 3)
     assert log == [("act", 0), ("step", 1), ("act", 2), ("step", 3), ("act", 4), ("step", 5)]
     assert float(obs[0, 0]) == 6
+
+
+
+@pytest.mark.parametrize("name, argv, suffix", [
+    ("xla_rollout", [], ""),
+    ("xla_rollout", ["--sizes", "8", "32"], ""),  # the defaults, spelt out
+    ("xla_rollout", ["--sizes", "2", "--steps", "8", "--repeats", "1"], "-B2-steps8-repeats1"),
+    ("ppo_rollout", [], ""),
+    ("ppo_rollout", ["--repeats", "1"], "-repeats1"),
+    ("jax_stages", [], ""),
+    ("jax_stages", ["--sizes", "256", "1024"], "-B256-1024"),
+])
+def test_the_other_scripts_name_a_run_with_other_options_apart(monkeypatch, tmp_path, name,
+                                                               argv, suffix):
+    """A tiny xla_rollout run overwrote the day's full one (a GPU run of jax_stages with --sizes
+    256 1024 the day's default one): an option that differs from its default is in the names."""
+    module = script(monkeypatch, name)
+    if name == "jax_stages":
+        monkeypatch.setattr(module, "measure", lambda sizes: {b: {"stage": 1.0} for b in sizes})
+    else:
+        monkeypatch.setattr(module, "measure", lambda *args: dict(
+            num_envs=1, python_loop=1.0, compiled_scan=1.0, ratio=1.0))
+        monkeypatch.setattr(module, "markdown", lambda *args: "title\n")
+        monkeypatch.setattr(module, "plot", lambda rows, path, title: path.write_bytes(b""))
+    if name == "ppo_rollout":
+        monkeypatch.setattr(module, "stage_rates", lambda results: [])
+    module.main(argv + ["--out", str(tmp_path)])
+    stems = {p.name.rsplit(".", 1)[0] for p in tmp_path.iterdir()}
+    assert len(stems) == 1
+    (stem,) = stems
+    assert stem.endswith({"xla_rollout": "-Breakout-3.1", "ppo_rollout": "-Breakout-3.1-nips",
+                          "jax_stages": ""}[name] + suffix), stem
+    day = datetime.date.today().isoformat()
+    assert stem.startswith(f"{name.replace('_', '-')}-{day}")
