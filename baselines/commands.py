@@ -241,7 +241,7 @@ def print_truncated(result: dict) -> None:
     if result["truncated"]:
         print(f"note: {result['truncated']} of {result['episodes']} episodes were cut off at "
               f"{result['max_episode_frames']} frames (truncated; --max-episode-frames "
-              "lowers the cap)")
+              "sets the cap)")
 
 
 def cmd_table(args) -> int:

@@ -318,28 +318,43 @@ def plot_curves(curves: dict, evaluations: list[dict], out_dir: Path,
     written = []
     for game in sorted({g for g, _ in curves}, key=lambda g: _order(g, "")):
         presets = sorted((p for g, p in curves if g == game), key=lambda p: _order(game, p))
+        # one colour per seed in every panel, and one legend for them all
+        seeds = sorted({run[2] for p in presets for run in curves[(game, p)]})
+        colour = {seed: f"C{i % 10}" for i, seed in enumerate(seeds)}
         fig, axes = plt.subplots(1, len(presets), figsize=(4 * len(presets), 3.2),
                                  squeeze=False, sharey=True)
+        legend = {}
         for ax, preset in zip(axes[0], presets):
             runs = curves[(game, preset)]
             ends = [end for *_, end, _ in runs]
             grid = np.linspace(0, max(max(ends), 1), 100)
-            lines = []
+            lines, silent = [], []
             for steps, returns, seed, end, _ in runs:
                 line = smoothed(steps, returns, grid, window, end)
                 lines.append(line)
-                ax.plot(grid, line, lw=0.8, alpha=0.5, label=f"seed {seed}")
+                if np.isnan(line).all():
+                    silent.append(seed)
+                legend[f"seed {seed}"] = ax.plot(grid, line, lw=0.8, alpha=0.5,
+                                                 color=colour[seed], label=f"seed {seed}")[0]
             mean = np.mean(np.array(lines), axis=0)  # NaN where a seed has no data: none
-            ax.plot(grid, mean, color="black", lw=1.6, label="mean over seeds")
+            legend["mean over seeds"] = ax.plot(grid, mean, color="black", lw=1.6,
+                                                label="mean over seeds")[0]
+            if silent:  # its curve is empty, and so is the mean over seeds
+                ax.text(0.02, 0.97, f"seed(s) {silent}: no finished episode,\nso no mean",
+                        transform=ax.transAxes, va="top", fontsize=7)
             if random_means.get((game, preset)):
-                ax.axhline(np.mean(random_means[(game, preset)]), color="grey", ls="--",
-                           label="random policy (eval)")
+                legend["random policy (eval)"] = ax.axhline(
+                    np.mean(random_means[(game, preset)]), color="grey", ls="--",
+                    label="random policy (eval)")
             ax.set_title(f"{game} {preset}")
             ax.set_xlabel("agent steps")
+            ax.set_xlim(0, grid[-1])  # also where no curve has a point
             ax.xaxis.set_major_formatter(FuncFormatter(_steps_label))
             ax.grid(alpha=0.3)
         axes[0][0].set_ylabel(f"episode return (mean of last {window})")
-        axes[0][-1].legend(fontsize=7)
+        order = [f"seed {seed}" for seed in seeds] + ["mean over seeds", "random policy (eval)"]
+        labels = [label for label in order if label in legend]
+        axes[0][-1].legend([legend[label] for label in labels], labels, fontsize=7)
         fig.tight_layout()
         out_dir.mkdir(parents=True, exist_ok=True)
         path = out_dir / f"curves-{game}.png"

@@ -1035,6 +1035,39 @@ def test_the_curves_show_each_seed_their_mean_and_the_random_policys_mean(tmp_pa
     close(figures[0])
 
 
+def test_the_curves_legend_names_every_line_of_every_panel_in_one_colour_per_seed(tmp_path,
+                                                                                   monkeypatch):
+    """The legend was the last panel's: a random-policy line or a seed only in another panel was
+    missing from it, and a seed's colour depended on its place in each panel. A seed without a
+    finished episode empties the mean over seeds: the panel says so, and keeps its axis."""
+    import matplotlib.pyplot as plt
+
+    from baselines.table import plot_curves
+
+    for preset, seed, returns in (("1", 13, (1.0, 3.0)), ("3.1", 0, (5.0,)), ("3.1", 13, ())):
+        run = tmp_path / f"Breakout-{preset}" / f"ppo-seed{seed}"
+        run.mkdir(parents=True)
+        (run / "config.json").write_text(json.dumps(dict(game="Breakout", preset=preset,
+                                                         seed=seed)))
+        (run / "episodes.csv").write_text("global_step,env,return,length\n" + "".join(
+            f"{100 * (k + 1)},0,{r},5\n" for k, r in enumerate(returns)))
+        (run / "log.csv").write_text("iteration,global_step\n1,400\n")
+    fake_eval(tmp_path, "Breakout", "1", "random", 0, 1.0)  # the first panel only
+    figures, close = [], plt.close
+    monkeypatch.setattr(plt, "close", figures.append)
+    plot_curves(learning_curves(tmp_path), load_evaluations(tmp_path), tmp_path / "out")
+    first, last = figures[0].axes
+    assert [t.get_text() for t in last.get_legend().get_texts()] == [
+        "seed 0", "seed 13", "mean over seeds", "random policy (eval)"]
+    colour = {(ax.get_title(), line.get_label()): line.get_color()
+              for ax in (first, last) for line in ax.lines}
+    assert colour[("Breakout 1", "seed 13")] == colour[("Breakout 3.1", "seed 13")] != colour[
+        ("Breakout 3.1", "seed 0")]
+    assert [t.get_text() for t in last.texts] == ["seed(s) [13]: no finished episode,\nso no mean"]
+    assert len(first.texts) == 0 and last.get_xlim() == (0, 400)
+    close(figures[0])
+
+
 # -- the command line -------------------------------------------------------------------------
 
 @pytest.mark.parametrize("argv,match", [
@@ -1115,7 +1148,7 @@ def test_eval_counts_and_reports_episodes_cut_off_at_the_frame_cap(tmp_path, cap
     assert result["truncated"] == 2 and result["lengths"] == [10, 10]
     assert result["software"]["packages"]["ale-py"] == ale_py.__version__
     assert "note: 2 of 2 episodes were cut off at 40 frames (truncated; --max-episode-frames " \
-        "lowers the cap)" in capsys.readouterr().out
+        "sets the cap)" in capsys.readouterr().out
     assert main(["eval", "--random", "--game", "Breakout", "--preset", "3.1",
                  "--max-episode-frames", "0", "--out", str(tmp_path), "--quiet"]) == 2
     assert "--max-episode-frames must be" in capsys.readouterr().err
