@@ -92,11 +92,11 @@ def run_dir(root: Path, game: str, preset: str, agent: str, seed: int) -> Path:
 DEFAULT_ROOT = Path("results") / "train"
 
 
-def check_no_result(path: Path, force: bool):
+def check_no_result(path: Path, force: bool, elsewhere: str = "another --out"):
     """An earlier evaluation is replaced only with --force (one may have cost an hour)."""
     if path.exists() and not force:
         raise ValueError(f"{path} already holds an evaluation: pass --force to replace it, "
-                         "or another --out")
+                         f"or {elsewhere}")
 
 
 def cmd_train(args) -> int:
@@ -139,7 +139,9 @@ def cmd_train(args) -> int:
         check_eval_seed(config.seed, config.seed + EVAL_SEED_OFFSET,
                         "train without --eval-episodes, then run stori-jax eval --checkpoint "
                         f"{out}/checkpoint.pkl --eval-seed S")
-        check_no_result(result_path(out, "sampled"), args.force)
+        check_no_result(result_path(out, "sampled"), args.force,
+                        "train without --eval-episodes, then run stori-jax eval --checkpoint "
+                        f"{out}/checkpoint.pkl --out DIR")
     trained = config.num_iterations * config.batch_size
     if trained != config.total_steps:
         print(f"stori-jax: --steps {config.total_steps} rounds up to {trained} agent steps, whole "

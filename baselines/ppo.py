@@ -521,11 +521,36 @@ def _rows_upto(path: Path, fields, upto_step: int) -> list[list[str]]:
 
 # -- training -------------------------------------------------------------------------------------
 
+def _recorded_parts(ckpt: dict) -> list:
+    """The checkpoint's software history (unrecorded software, None, in one from before it was
+    kept)."""
+    return list(ckpt.get("software_parts", [dict(from_iteration=0, software=None)]))
+
+
+def _checked_checkpoint(config: PPOConfig, ckpt_path: Path, stop_after: int | None) -> dict:
+    """The checkpoint a resume continues: trained under ``config``, with all a run needs, and
+    not beyond ``stop_after``."""
+    ckpt = load_checkpoint(ckpt_path)
+    recorded = dataclasses.asdict(PPOConfig.from_recorded(ckpt["config"]))
+    differ = [f"{k} {recorded[k]!r} there, {v!r} now"
+              for k, v in dataclasses.asdict(config).items() if recorded[k] != v]
+    if differ:
+        raise ValueError(f"--resume: {ckpt_path} was trained with a different config: "
+                         + "; ".join(differ))
+    missing = [k for k in RESUME_STATE if k not in ckpt]
+    if missing:
+        raise ValueError(f"--resume: {ckpt_path} lacks {missing}, which a run needs to continue")
+    if stop_after is not None and stop_after < ckpt["iteration"]:
+        raise ValueError(f"stop_after {stop_after} is before {ckpt_path}'s iteration "
+                         f"{ckpt['iteration']}: a run cannot go back")
+    return ckpt
+
+
 def _software_parts(ckpt: dict, start: int, made_with: dict, path: Path) -> list:
     """The checkpoint's software history, with this part's software appended where it differs
     from the last part's (a warning says so). A checkpoint written before the history was kept
     starts it with unrecorded software (None)."""
-    parts = list(ckpt.get("software_parts", [dict(from_iteration=0, software=None)]))
+    parts = _recorded_parts(ckpt)
     before = parts[-1]["software"]
     if before == made_with:
         return parts
@@ -549,7 +574,9 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
     (with a checkpoint) after that many iterations in total, as an interruption would.  The
     summary's ``software`` is what this call started with; ``software_parts`` lists the
     software of every part of a resumed run where it changed (resuming with other software
-    warns: the run no longer matches an uninterrupted one bit for bit)."""
+    warns: the run may no longer match an uninterrupted one bit for bit).  A resume with
+    nothing to train returns the run's summary as recorded and touches no file (but writes a
+    finished run's summary.json if an interruption came before it)."""
     from tqdm import tqdm
 
     made_with = software()  # before training, not whatever is installed when it ends
@@ -560,33 +587,22 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
     ckpt_path, log_path, ep_path = out / "checkpoint.pkl", out / "log.csv", out / "episodes.csv"
     last = config.num_iterations if stop_after is None else min(stop_after,
                                                                 config.num_iterations)
+    ckpt = _checked_checkpoint(config, ckpt_path, stop_after) if resume else None
+    if ckpt is not None and ckpt["iteration"] == last:  # nothing to train
+        parts = _recorded_parts(ckpt)
+        summary = _summary(config, last, ckpt["elapsed_s"], parts[-1]["software"], parts)
+        if summary["finished"] and not (out / "summary.json").exists():
+            (out / "summary.json").write_text(json.dumps(summary, indent=1))
+        return dict(summary, iterations_now=0)
     envs = make_envs(config)
     try:
         network = make_network(config, envs[0].num_actions)
         optimizer = make_optimizer(config)
         act_fn = jax.jit(lambda p, o, k: act(network, p, o, k))
         update = make_update(network, optimizer, config)
-        if resume:
-            ckpt = load_checkpoint(ckpt_path)
-            recorded = dataclasses.asdict(PPOConfig.from_recorded(ckpt["config"]))
-            differ = [f"{k} {recorded[k]!r} there, {v!r} now"
-                      for k, v in dataclasses.asdict(config).items() if recorded[k] != v]
-            if differ:
-                raise ValueError(f"--resume: {ckpt_path} was trained with a different config: "
-                                 + "; ".join(differ))
-            missing = [k for k in RESUME_STATE if k not in ckpt]
-            if missing:
-                raise ValueError(f"--resume: {ckpt_path} lacks {missing}, which a run needs to "
-                                 "continue")
+        if ckpt is not None:
             params, opt_state = ckpt["params"], ckpt["opt_state"]
             key, start, obs = ckpt["key"], ckpt["iteration"], list(ckpt["obs"])
-            if stop_after is not None and stop_after < start:
-                raise ValueError(f"stop_after {stop_after} is before {ckpt_path}'s iteration "
-                                 f"{start}: a run cannot go back")
-            if start == last:  # nothing to train: every file stays as it is
-                parts = ckpt.get("software_parts", [dict(from_iteration=0, software=None)])
-                return _summary(config, start, ckpt["elapsed_s"], parts[-1]["software"], parts,
-                                iterations_now=0)
             software_parts = _software_parts(ckpt, start, made_with, ckpt_path)
             for env, snap in zip(envs, ckpt["envs"]):
                 env.restore(snap)
@@ -656,13 +672,13 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
 
 
 def _summary(config: PPOConfig, iterations: int, elapsed: float, made_with: dict,
-             software_parts: list, **extra) -> dict:
+             software_parts: list) -> dict:
     """summary.json's content for a run trained ``iterations`` in ``elapsed`` seconds."""
     return dict(config=dataclasses.asdict(config), iterations_done=iterations,
                 finished=iterations == config.num_iterations,
                 agent_steps=iterations * config.batch_size, train_seconds=elapsed,
                 train_sps=iterations * config.batch_size / max(elapsed, 1e-9),
-                software=made_with, software_parts=software_parts, **extra)
+                software=made_with, software_parts=software_parts)
 
 
 def env_only_sps(config: PPOConfig, agent_steps: int = 2048) -> float:

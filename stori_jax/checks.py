@@ -84,12 +84,15 @@ def check_real(name: str, value: Any, minimum: float | None = None,
 
 
 def check_probability(name: str, value: Any) -> float:
-    """``value`` as a float in [0, 1].  A float32 (numpy or JAX, the precision the draws use)
-    becomes the shortest decimal of its value (np.float32(0.3) -> 0.3, not 0.30000001192...),
-    so that it plays, prints, records and compares as the same config written as a literal."""
+    """``value`` as a float in [0, 1].  A float32 (numpy or JAX) becomes the shortest decimal
+    that rounds to the same float32 (np.float32(0.3) -> 0.3, not 0.30000001192...), so that it
+    prints, records and compares as the config written as a literal, and plays as it: the JAX
+    draws compare in float32, the event draws in the workers in float64 against that decimal."""
     prob = check_real(name, value, 0, 1)
     if getattr(getattr(value, "dtype", None), "name", None) == "float32":
-        prob = float(np.format_float_positional(np.float32(prob), unique=True))
+        decimal = float(np.format_float_positional(np.float32(prob), unique=True))
+        if np.float32(decimal) == np.float32(prob):  # all but a rare double rounding
+            prob = decimal
     return prob
 
 

@@ -73,8 +73,8 @@ def channel_matrix(num_actions: int, prob: float,
     ``replacement`` (default: all actions), else the intended action.
 
     ``replacement`` is a sequence of action ids in [0, n - 1], drawn from uniformly by position as
-    the environment does (``ActionNoise.replacement_actions``), so a repeated id counts once per
-    occurrence: ``[1, 1, 2]`` replaces by 1 with prob 2p/3."""
+    ``functional.corrupt_actions`` does, so a repeated id counts once per occurrence: ``[1, 1,
+    2]`` replaces by 1 with prob 2p/3 (``ActionNoise.replacement_actions`` refuses repeats)."""
     prob = check_probability("prob", prob)
     num_actions = _check_num_actions(num_actions)
     if replacement is None:

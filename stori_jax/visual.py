@@ -6,6 +6,7 @@ preset does) with raw observations, and draw with Pillow.
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 from typing import NamedTuple
 
@@ -58,6 +59,12 @@ class Showcase(NamedTuple):
     note: str = ""
 
 
+def random_actions(rng: np.random.Generator, num_actions: int, batch: int) -> np.ndarray:
+    """A picture's random actions of one step, drawn for ``batch`` envs (the search for a 2.2
+    picture's episode and the run that draws it must draw the same)."""
+    return rng.integers(num_actions, size=batch).astype(np.int32)
+
+
 def twin_run(game: str, config: Config, steps: int, seed: int = 0, *, with_twin: bool = True,
              progress: str | None = None, showcase: Showcase = Showcase()):
     """Run ``config`` and its 3.1 twin side by side on the same intended actions (the same
@@ -93,8 +100,7 @@ def twin_run(game: str, config: Config, steps: int, seed: int = 0, *, with_twin:
         for t in tqdm(range(start + steps + 1), desc=progress, unit="step",
                       disable=progress is None):
             if t:
-                actions = rng.integers(env.num_actions, size=showcase.action_batch)
-                actions = actions[:num_envs].astype(np.int32)
+                actions = random_actions(rng, env.num_actions, showcase.action_batch)[:num_envs]
                 obs, reward, terminated, truncated, info = env.step(actions)
                 # the twin gets the intended actions: without type-1 noise it plays the same game
                 twin_obs = twin.step(actions)[0] if twin is not None else None
@@ -161,7 +167,7 @@ def drift_showcase(game: str, config: Config, steps: int, seed: int = 0, *,
         env.reset()
         started = np.zeros(n, np.int64)  # the agent step that began each env's episode
         for t in range(1, budget + 1):
-            actions = rng.integers(env.num_actions, size=n).astype(np.int32)
+            actions = random_actions(rng, env.num_actions, n)
             _, _, _, _, info = env.step(actions)
             bar.update()
             new_episode = np.asarray(info["reset_step"])  # the step after an end resets
@@ -247,7 +253,8 @@ def record_episode(game: str, name: str, config: Config, path: Path, *, max_step
     note = showcase.note
     frames = twin_run(game, config, max_steps, seed, with_twin=False,
                       progress=f"{game} {name}" if progress else None, showcase=showcase)
-    w, h, bar = 160 * SCALE, 210 * SCALE, 56 if note else 40
+    note_lines = textwrap.wrap(note, 52)  # 6 px a character on a 320 px frame
+    w, h, bar = 160 * SCALE, 210 * SCALE, 40 + 16 * len(note_lines)
     images = []
     for f in frames:
         img = Image.new("RGB", (w, h + bar), (0, 0, 0))
@@ -257,8 +264,8 @@ def record_episode(game: str, name: str, config: Config, path: Path, *, max_step
         if f["action"] is not None:
             draw.text((4, 20), f"intended {f['action']}  executed {f['executed']}",
                       fill=(200, 200, 200))
-        if note:
-            draw.text((4, 38), note, fill=(200, 200, 200))
+        for i, line in enumerate(note_lines):
+            draw.text((4, 38 + 16 * i), line, fill=(200, 200, 200))
         images.append(img)
     return _save_whole(path, lambda tmp: images[0].save(
         tmp, save_all=True, append_images=images[1:], duration=50, loop=0,

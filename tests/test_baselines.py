@@ -454,6 +454,20 @@ def test_resuming_a_finished_run_touches_no_file(uninterrupted, monkeypatch):
     assert again == dict(summary, iterations_now=0)
 
 
+def test_resuming_a_run_stopped_before_its_summary_writes_it(uninterrupted, tmp_path):
+    """An interruption after the last checkpoint but before summary.json: --resume has nothing
+    to train and writes the summary (run_evidence.py resumes such runs and reads it)."""
+    import shutil
+
+    full, _ = uninterrupted
+    run = tmp_path / "run"
+    shutil.copytree(full, run)
+    (run / "summary.json").unlink()
+    assert ppo.train(tiny(), run, progress=False, resume=True)["iterations_now"] == 0
+    assert json.loads((run / "summary.json").read_text()) == json.loads(
+        (full / "summary.json").read_text())
+
+
 def test_same_seed_same_updates_other_seed_others(uninterrupted, tmp_path):
     full, _ = uninterrupted
     ppo.train(tiny(), tmp_path / "same", progress=False, stop_after=1)
@@ -1256,8 +1270,9 @@ def test_cli_train_evaluates_the_sampled_policy_of_its_checkpoint(tmp_path, monk
              "64", "--eval-episodes", "2", "--out", str(tmp_path), "--resume", "--quiet"]
     monkeypatch.setattr(ppo, "train", lambda *a, **k: pytest.fail("trained before refusing"))
     assert main(again) == 2
-    assert f"{tmp_path / 'eval-sampled.json'} already holds an evaluation: pass --force" in \
-        capsys.readouterr().err
+    assert (f"{tmp_path / 'eval-sampled.json'} already holds an evaluation: pass --force to "
+            "replace it, or train without --eval-episodes, then run stori-jax eval --checkpoint "
+            f"{tmp_path}/checkpoint.pkl --out DIR") in capsys.readouterr().err
     assert json.loads((tmp_path / "eval-sampled.json").read_text())["episodes"] == 3
     monkeypatch.setattr(ppo, "train", train)
     assert main(again + ["--force"]) == 0

@@ -768,7 +768,6 @@ def test_the_sequential_rollout_chooses_then_steps_every_step(monkeypatch):
     assert float(obs[0, 0]) == 6
 
 
-
 @pytest.mark.parametrize("name, argv, suffix", [
     ("xla_rollout", [], ""),
     ("xla_rollout", ["--sizes", "8", "32"], ""),  # the defaults, spelt out

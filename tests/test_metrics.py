@@ -109,8 +109,8 @@ def test_mutual_information_inputs_are_validated():
 
 
 def test_channel_matrix_replacement_is_validated_and_repeats_count():
-    # the environment draws uniformly from the replacement tuple by position, so a repeated id
-    # weighs more; the rows used to sum to 1 - p/2 for [1, 1]
+    # functional.corrupt_actions draws uniformly from the replacement tuple by position, so a
+    # repeated id weighs more; the rows used to sum to 1 - p/2 for [1, 1]
     m = channel_matrix(4, 0.3, [1, 1])
     np.testing.assert_allclose(m.sum(1), 1.0)
     np.testing.assert_allclose(m[0], [0.7, 0.3, 0.0, 0.0])

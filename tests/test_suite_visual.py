@@ -468,3 +468,27 @@ def test_a_drift_picture_plays_long_enough_to_reach_concept_2(monkeypatch, tmp_p
         visual.contact_sheet("Gopher", "x", config, tmp_path / "x.png", steps=steps)
         assert played[-1] == (expected, visual.Showcase(note=f"{expected}"))
     assert visual.SHEET_STEPS == 200 and visual.AFTER_SWITCH == 100
+
+
+def test_a_recordings_note_is_wrapped_into_its_bar(monkeypatch, tmp_path):
+    """A 2.2 note is 80-100 characters, and a recording 320 px wide: one line was cut off."""
+    import textwrap
+
+    import stori_jax.visual as visual
+
+    note = ("env 12's episode from agent step 1234 (seed 0), the first of 16 envs' episodes to "
+            "reach concept 2")
+    frame = dict(step=0, preset=np.zeros((210, 160, 3), np.uint8), twin=None, corrupted=False,
+                 event=0, concept=0, masked=False, action=None, executed=None)
+    monkeypatch.setattr(visual, "drift_showcase", lambda *a, **k: visual.Showcase(note=note))
+    monkeypatch.setattr(visual, "twin_run", lambda *a, **k: [frame, dict(frame, step=1)])
+    path = visual.record_episode("Breakout", "2.2", stori_jax.Config(), tmp_path / "a.gif")
+    with Image.open(path) as gif:
+        width, height = gif.size
+        bar = np.asarray(gif.convert("RGB"))[:height - 420]
+    lines = textwrap.wrap(note, 52)
+    assert (width, height) == (320, 420 + 40 + 16 * len(lines)) and len(lines) == 2
+    drawn = np.flatnonzero(bar.any(axis=(0, 2)))
+    assert drawn.max() < width - 4  # nothing runs off the right edge
+    rows = np.flatnonzero(bar.any(axis=(1, 2)))
+    assert rows.max() > 38 + 16  # the second line is drawn
