@@ -63,8 +63,9 @@ def _cmd_run(args) -> int:
     print(f"mean return       : {'n/a (no episode finished)' if mean is None else f'{mean:.2f}'}")
     print(f"events fired      : {stats['events_fired']}")
     print(f"corrupted actions : {stats['corrupted_actions']} of {stats['action_draws']} "
-          f"({stats['corrupted_fraction']:.2f}; one draw per emulator frame at frame "
-          "granularity; a replacement may be the intended action itself)")
+          f"({stats['corrupted_fraction']:.2f}; one draw per "
+          f"{'emulator frame' if env.plan.per_frame else 'agent step'}; a replacement may be "
+          "the intended action itself)")
     print(f"concept switches  : {stats['concept_switches']}")
     print(f"masked obs        : {stats['masked_obs']} of {env_steps}")
     print(f"env steps / s     : {stats['env_steps_per_s']:.0f} ({env_steps} steps in "

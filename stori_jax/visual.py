@@ -253,19 +253,24 @@ def record_episode(game: str, name: str, config: Config, path: Path, *, max_step
     note = showcase.note
     frames = twin_run(game, config, max_steps, seed, with_twin=False,
                       progress=f"{game} {name}" if progress else None, showcase=showcase)
-    note_lines = textwrap.wrap(note, 52)  # 6 px a character on a 320 px frame
-    w, h, bar = 160 * SCALE, 210 * SCALE, 40 + 16 * len(note_lines)
+    # lines of at most 52 characters (about 6 px each) on a 320 px frame; one bar height for all
+    captions = [textwrap.wrap(f"{game} {name}  {_caption(f)}", 52) for f in frames]
+    note_lines = textwrap.wrap(note, 52)
+    caption_rows = max(len(c) for c in captions)
+    w, h, bar = 160 * SCALE, 210 * SCALE, 8 + 16 * (caption_rows + 1 + len(note_lines))
     images = []
-    for f in frames:
+    for f, caption in zip(frames, captions):
         img = Image.new("RGB", (w, h + bar), (0, 0, 0))
         img.paste(Image.fromarray(f["preset"]).resize((w, h), Image.NEAREST), (0, bar))
         draw = ImageDraw.Draw(img)
-        draw.text((4, 2), f"{game} {name}  {_caption(f)}", fill=(255, 255, 120))
+        for i, line in enumerate(caption):
+            draw.text((4, 2 + 16 * i), line, fill=(255, 255, 120))
+        y = 2 + 16 * caption_rows
         if f["action"] is not None:
-            draw.text((4, 20), f"intended {f['action']}  executed {f['executed']}",
+            draw.text((4, y), f"intended {f['action']}  executed {f['executed']}",
                       fill=(200, 200, 200))
         for i, line in enumerate(note_lines):
-            draw.text((4, 38 + 16 * i), line, fill=(200, 200, 200))
+            draw.text((4, y + 16 * (i + 1)), line, fill=(200, 200, 200))
         images.append(img)
     return _save_whole(path, lambda tmp: images[0].save(
         tmp, save_all=True, append_images=images[1:], duration=50, loop=0,

@@ -470,8 +470,9 @@ def test_a_drift_picture_plays_long_enough_to_reach_concept_2(monkeypatch, tmp_p
     assert visual.SHEET_STEPS == 200 and visual.AFTER_SWITCH == 100
 
 
-def test_a_recordings_note_is_wrapped_into_its_bar(monkeypatch, tmp_path):
-    """A 2.2 note is 80-100 characters, and a recording 320 px wide: one line was cut off."""
+def test_a_recordings_captions_and_note_are_wrapped_into_its_bar(monkeypatch, tmp_path):
+    """A 2.2 note is 80-100 characters, a caption with a long config name and every flag as
+    long, and a recording 320 px wide: both ran off its right edge."""
     import textwrap
 
     import stori_jax.visual as visual
@@ -480,15 +481,18 @@ def test_a_recordings_note_is_wrapped_into_its_bar(monkeypatch, tmp_path):
             "reach concept 2")
     frame = dict(step=0, preset=np.zeros((210, 160, 3), np.uint8), twin=None, corrupted=False,
                  event=0, concept=0, masked=False, action=None, executed=None)
+    busy = dict(frame, step=15, corrupted=True, event=2, concept=1, masked=True, action=3,
+                executed=[3, 1, 1, 3])
     monkeypatch.setattr(visual, "drift_showcase", lambda *a, **k: visual.Showcase(note=note))
-    monkeypatch.setattr(visual, "twin_run", lambda *a, **k: [frame, dict(frame, step=1)])
-    path = visual.record_episode("Breakout", "2.2", stori_jax.Config(), tmp_path / "a.gif")
+    monkeypatch.setattr(visual, "twin_run", lambda *a, **k: [frame, busy])
+    name = "breakout_drift_to_noise_v2"
+    path = visual.record_episode("Breakout", name, stori_jax.Config(), tmp_path / "a.gif")
+    caption = textwrap.wrap(f"Breakout {name}  {visual._caption(busy)}", 52)
+    assert len(caption) == 2 and len(textwrap.wrap(note, 52)) == 2
     with Image.open(path) as gif:
-        width, height = gif.size
-        bar = np.asarray(gif.convert("RGB"))[:height - 420]
-    lines = textwrap.wrap(note, 52)
-    assert (width, height) == (320, 420 + 40 + 16 * len(lines)) and len(lines) == 2
-    drawn = np.flatnonzero(bar.any(axis=(0, 2)))
-    assert drawn.max() < width - 4  # nothing runs off the right edge
+        assert gif.size == (320, 420 + 8 + 16 * (2 + 1 + 2))  # captions, action, note
+        gif.seek(1)
+        bar = np.asarray(gif.convert("RGB"))[:8 + 16 * 5]
+    assert np.flatnonzero(bar.any(axis=(0, 2))).max() < 320 - 4  # nothing runs off the edge
     rows = np.flatnonzero(bar.any(axis=(1, 2)))
-    assert rows.max() > 38 + 16  # the second line is drawn
+    assert rows.max() > 2 + 16 * 4  # the note's second line is drawn
