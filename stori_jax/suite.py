@@ -109,6 +109,20 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def short_rows_note(rows: list[dict], episodes: int, num_envs: int, max_steps: int) -> str:
+    """A line under the table where a row has fewer episodes than asked: --max-steps came
+    first (each env plays a fixed share of the episodes, so another env's finished episodes do
+    not stand in)."""
+    short = [f"{r['game']} {r['preset']}" for r in rows if r["episodes"] < episodes]
+    if not short:
+        return ""
+    shares = ", ".join(map(str, episode_quotas(episodes, num_envs)))
+    return (f"\nFewer than {episodes} episode{'s' * (episodes != 1)} in {', '.join(short)}: "
+            f"each run stopped at --max-steps {max_steps} agent steps first. Each of the "
+            f"{num_envs} envs plays a fixed share of the episodes ({shares}), so that short "
+            "episodes are not favoured.\n")
+
+
 def sheet_path(out: Path, game: str, name: str) -> Path:
     """Where a suite run in ``out`` puts the contact sheet of ``game``'s preset ``name``."""
     return out / "gallery" / f"{game}-{name}.png"
@@ -179,7 +193,8 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
         agent=agent or "random", seed=seed, episodes=episodes, num_envs=num_envs,
         max_steps=max_steps, software=made_with, rows=rows),
         indent=1))
-    text = f"Agent: {agent or 'uniformly random policy'}\n\n" + table(rows)
+    text = (f"Agent: {agent or 'uniformly random policy'}\n\n" + table(rows)
+            + short_rows_note(rows, episodes, num_envs, max_steps))
     if gallery:
         text += "\nGallery (3.1 twin beside each preset): " + ", ".join(
             f"[{g} {n}]({sheet_path(out, g, n).relative_to(out)})" for g, n in presets) + "\n"

@@ -496,3 +496,25 @@ def test_a_recordings_captions_and_note_are_wrapped_into_its_bar(monkeypatch, tm
     assert np.flatnonzero(bar.any(axis=(0, 2))).max() < 320 - 4  # nothing runs off the edge
     rows = np.flatnonzero(bar.any(axis=(1, 2)))
     assert rows.max() > 2 + 16 * 4  # the note's second line is drawn
+
+
+def test_the_table_says_why_a_row_has_fewer_episodes_than_asked(tmp_path):
+    """--episodes 1 --num-envs 2: env 0 plays the one episode; a row whose env 0 had not
+    finished by --max-steps showed '-' and 0 episodes with no word why (env 1's finished
+    episode does not stand in for it)."""
+    from stori_jax.suite import short_rows_note
+
+    rows = [dict(game="Breakout", preset="1", episodes=1),
+            dict(game="Breakout", preset="2.2", episodes=0),
+            dict(game="Boxing", preset="3.2A", episodes=2)]
+    assert short_rows_note(rows[:1], 1, 2, 300) == ""
+    assert short_rows_note(rows, 3, 2, 300) == (
+        "\nFewer than 3 episodes in Breakout 1, Breakout 2.2, Boxing 3.2A: each run stopped at "
+        "--max-steps 300 agent steps first. Each of the 2 envs plays a fixed share of the "
+        "episodes (2, 1), so that short episodes are not favoured.\n")
+    out = tmp_path / "suite"
+    assert main(["suite", "--games", "Breakout", "--presets", "3.2A", "--episodes", "1",
+                 "--num-envs", "2", "--max-steps", "5", "--out", str(out), "--quiet",
+                 "--no-gallery"]) == 0
+    assert "Fewer than 1 episode in Breakout 3.2A: each run stopped at --max-steps 5" in (
+        out / "table.md").read_text()
