@@ -819,6 +819,18 @@ def test_greedy_acts_by_the_argmax_and_sampled_draws_from_the_policy(uninterrupt
 
 # -- the table --------------------------------------------------------------------------------
 
+def fake_training_run(root, preset, seed, returns, last_step=None):
+    """A Breakout PPO run folder: its config and one episode per return, every 100 steps (and a
+    log whose last global_step is ``last_step``)."""
+    run = root / f"Breakout-{preset}" / f"ppo-seed{seed}"
+    run.mkdir(parents=True)
+    (run / "config.json").write_text(json.dumps(dict(game="Breakout", preset=preset, seed=seed)))
+    (run / "episodes.csv").write_text("global_step,env,return,length\n" + "".join(
+        f"{100 * (k + 1)},0,{r},5\n" for k, r in enumerate(returns)))
+    if last_step is not None:
+        (run / "log.csv").write_text(f"iteration,global_step\n1,{last_step}\n")
+
+
 def fake_eval(root, game, preset, agent, seed, mean, policy=None):
     policy = policy or ("random" if agent == "random" else "sampled")
     write_result(dict(game=game, preset=preset, agent=agent, policy=policy, train_seed=seed,
@@ -1023,12 +1035,7 @@ def test_the_curves_show_each_seed_their_mean_and_the_random_policys_mean(tmp_pa
 
     for preset, seed, returns in (("3.1", 0, (1.0, 3.0)), ("3.1", 7, (5.0, 7.0)),
                                   ("1", 0, (2.0, 2.0))):
-        run = tmp_path / f"Breakout-{preset}" / f"ppo-seed{seed}"
-        run.mkdir(parents=True)
-        (run / "config.json").write_text(json.dumps(dict(game="Breakout", preset=preset,
-                                                         seed=seed)))
-        (run / "episodes.csv").write_text("global_step,env,return,length\n" + "".join(
-            f"{100 * (k + 1)},0,{r},5\n" for k, r in enumerate(returns)))
+        fake_training_run(tmp_path, preset, seed, returns)
     for seed, mean in ((0, 1.0), (7, 4.0)):
         fake_eval(tmp_path, "Breakout", "3.1", "random", seed, mean)
     figures, close = [], plt.close
@@ -1059,13 +1066,7 @@ def test_the_curves_legend_names_every_line_of_every_panel_in_one_colour_per_see
     from baselines.table import plot_curves
 
     for preset, seed, returns in (("1", 13, (1.0, 3.0)), ("3.1", 0, (5.0,)), ("3.1", 13, ())):
-        run = tmp_path / f"Breakout-{preset}" / f"ppo-seed{seed}"
-        run.mkdir(parents=True)
-        (run / "config.json").write_text(json.dumps(dict(game="Breakout", preset=preset,
-                                                         seed=seed)))
-        (run / "episodes.csv").write_text("global_step,env,return,length\n" + "".join(
-            f"{100 * (k + 1)},0,{r},5\n" for k, r in enumerate(returns)))
-        (run / "log.csv").write_text("iteration,global_step\n1,400\n")
+        fake_training_run(tmp_path, preset, seed, returns, last_step=400)
     fake_eval(tmp_path, "Breakout", "1", "random", 0, 1.0)  # the first panel only
     figures, close = [], plt.close
     monkeypatch.setattr(plt, "close", figures.append)
