@@ -170,6 +170,7 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
             raise ValueError(f"--checkpoint {checkpoint} plays {trained_on} only; choose its "
                              f"presets with --games {trained_on} (asked for {others})")
         agent = str(checkpoint)
+    created = [d for d in (out, *out.parents) if not d.exists()]  # the deepest first
     out.mkdir(parents=True, exist_ok=True)
     rows, written = [], [out / "results.json", out / "table.md"]
     # the sheets wait in a hidden folder until the run has finished: an interrupted run leaves
@@ -187,6 +188,12 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
             written.append(sheet_path(out, game, name))
             written[-1].parent.mkdir(exist_ok=True)
             os.replace(sheet_path(staging, game, name), written[-1])
+    except BaseException:  # an interrupted first run leaves no empty folder behind either
+        shutil.rmtree(staging, ignore_errors=True)
+        for folder in created:
+            if folder.is_dir() and not any(folder.iterdir()):
+                folder.rmdir()
+        raise
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     (out / "results.json").write_text(json.dumps(dict(

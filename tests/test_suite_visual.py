@@ -60,6 +60,23 @@ def test_a_suite_run_replaces_an_earlier_runs_files_and_nothing_else(tmp_path, c
     assert [(r["game"], r["preset"]) for r in rows] == [("Breakout", "1")]
 
 
+def test_an_interrupted_first_suite_run_leaves_no_empty_folder(tmp_path, monkeypatch):
+    """Ctrl-C in a run into a new --out (and a new parent) left both folders behind, empty;
+    a folder that was there before stays."""
+    import stori_jax.suite
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(stori_jax.suite, "run_preset", interrupted)
+    out = tmp_path / "results" / "suite"
+    assert main(["suite", "--games", "Breakout", "--out", str(out), "--quiet"]) == 130
+    assert list(tmp_path.iterdir()) == []
+    out.mkdir(parents=True)
+    assert main(["suite", "--games", "Breakout", "--out", str(out), "--quiet"]) == 130
+    assert list(out.iterdir()) == []
+
+
 def test_a_suite_run_stopped_after_some_sheets_leaves_the_earlier_run_whole(tmp_path,
                                                                           monkeypatch):
     """A run into the folder of an earlier one, stopped after its first preset (a Ctrl-C):
