@@ -591,8 +591,8 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
     if ckpt is not None and ckpt["iteration"] == last:  # nothing to train
         parts = _recorded_parts(ckpt)
         summary = _summary(config, last, ckpt["elapsed_s"], parts[-1]["software"], parts)
-        if summary["finished"] and not (out / "summary.json").exists():
-            (out / "summary.json").write_text(json.dumps(summary, indent=1))
+        if not (out / "summary.json").exists():  # an interruption came before it
+            _write_summary(out, summary)
         return dict(summary, iterations_now=0)
     envs = make_envs(config)
     try:
@@ -666,9 +666,14 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
         for env in envs:
             env.close()
     summary = _summary(config, last, elapsed, made_with, software_parts)
+    _write_summary(out, summary)
+    return dict(summary, iterations_now=last - start)
+
+
+def _write_summary(out: Path, summary: dict) -> None:
+    """``out``/summary.json, once the run has finished (its table and evaluation read it)."""
     if summary["finished"]:
         (out / "summary.json").write_text(json.dumps(summary, indent=1))
-    return dict(summary, iterations_now=last - start)
 
 
 def _summary(config: PPOConfig, iterations: int, elapsed: float, made_with: dict,
