@@ -168,8 +168,14 @@ def _slots_equal(value):
 SPEC_RAM_WRITES = {
     ("Breakout", 2): lambda ram: {99: 0, 101: 0},
     ("Boxing", 2): lambda ram: {2: 214},
-    ("Gopher", 1): lambda ram: {52: int(ram[52]) & ~0b100},
+    ("Gopher", 1): lambda ram: {52: int(ram[52]) & ~0b100},                # hide left carrot
+    ("Gopher", 2): lambda ram: {52: int(ram[52]) & ~0b010},                # middle
+    ("Gopher", 3): lambda ram: {52: int(ram[52]) & ~0b001},                # right
+    ("Gopher", 4): lambda ram: {52: 0},                                    # all carrots
     ("Gopher", 5): lambda ram: {92: 128} if ram[92] != 128 else None,    # hide seed
+    ("BankHeist", 1): lambda ram: {8: 155, 28: 12},                        # hide robber car
+    ("BankHeist", 2): lambda ram: {86: 0},                                 # fuel gauge full
+    ("BankHeist", 3): lambda ram: {66: 0, 68: 0},                          # hide city blocks
     ("BankHeist", 4): lambda ram: {69: {0: 30, 1: 190, 2: 46, 3: 126}[int(ram[0]) % 4]},
     ("BankHeist", 5): _slots_equal(253),                                   # hide banks
     ("BankHeist", 6): _slots_equal(254),                                   # hide police
@@ -619,3 +625,44 @@ def test_type0_boxing_labels_follow_the_scores():
                       for i in run.info]).astype(int)
     assert clock[0].tolist() == [119, 119] and clock[-1].tolist() == [110, 110]
     assert set(np.diff(clock, axis=0).ravel().tolist()) == {0, -1}
+
+
+# the labels of STORI_SPEC sections 7 and 8 and the RAM bytes they read (label: address)
+SPEC_LABEL_BYTES = {
+    "Gopher": {"farmer_x": 31, "seed_y": 92, "seed_x": 95, "underground_row0_0": 0,
+               "underground_row3_5": 23, "duck_25": 25, "duck_94": 94},
+    "BankHeist": {"city_count": 0, "robber_y": 8, "robber_x": 28, "bomb": 12, "direction": 15,
+                  "orientation": 51, "slot_0": 24, "slot_2": 26, "police_orientation_0": 52,
+                  "lives": 85, "fuel": 86, "background_colour": 69, "city_blocks_66": 66},
+}
+
+
+@pytest.mark.parametrize("game", sorted(SPEC_LABEL_BYTES))
+def test_type0_labels_read_the_spec_addresses(game):
+    """Type 0 through make() on Gopher and BankHeist: the observation is the RAM after every
+    step, and each label reads its spec address (Gopher's carrots: bits 2..0 of RAM 52, its
+    score: the running sum of rewards; BankHeist's city: RAM 0 % 4)."""
+    num_actions = get_game(game).num_actions
+    env = make(game, Config(ram_observation=True), obs=None)
+    try:
+        assert env.observation_space.shape == (2, 128)
+        run = run_env(env, random_actions(num_actions, 300, 2, seed=4))
+    finally:
+        env.close()
+    assert not run.done.any()
+    np.testing.assert_array_equal(np.concatenate([run.reset_obs[None], run.stacked("obs")]),
+                                  run.ram)
+    labels = {k: np.stack([run.reset_info["labels"][k]] + [i["labels"][k] for i in run.info])
+              for k in run.reset_info["labels"]}
+    ram = run.ram.astype(int)
+    for name, address in SPEC_LABEL_BYTES[game].items():
+        np.testing.assert_array_equal(labels[name], ram[..., address], err_msg=name)
+    if game == "Gopher":
+        np.testing.assert_array_equal(labels["carrots"], ram[..., 52] & 7)
+        returns = np.concatenate([np.zeros((1, 2)), np.cumsum(run.stacked("reward"), 0)])
+        assert returns[-1].max() > 0
+        np.testing.assert_array_equal(labels["score"], returns)
+    else:
+        np.testing.assert_array_equal(labels["city"], ram[..., 0] % 4)
+    moving = {"Gopher": "farmer_x", "BankHeist": "robber_x"}[game]   # not a still picture
+    assert len(np.unique(labels[moving])) > 1
