@@ -109,3 +109,26 @@ def test_extract_labels_jit_and_vmap():
         assert value.shape == (2, 32) and value.dtype == jnp.int32
         np.testing.assert_array_equal(np.asarray(value).ravel(),
                                       np.asarray(extract_labels(game, rams[:64])[name]))
+
+
+def test_boxing_knockout_scores_100_on_real_ram():
+    """A boxer at 99 who lands a punch wins by knockout: the game writes 0xC0 to its score byte
+    and ends the bout; ALE counts that as 100 (reward +1), and so must the labels (a BCD read
+    gives 120). The enemy's byte decodes the same way."""
+    ale, actions = ale_and_actions("boxing")
+    ale.act(actions[0])
+    ale.setRAM(18, 0x99)
+    ale.act(actions[0])
+    rng = np.random.default_rng(0)
+    for _ in range(2000):
+        reward = ale.act(actions[rng.integers(len(actions))])
+        if ale.game_over():
+            break
+    assert ale.game_over() and reward == 1
+    ram = ale.getRAM().copy()
+    assert ram[18] == 0xC0
+    enemy_knockout = ram.copy()
+    enemy_knockout[18:20] = (0x37, 0xC0)
+    labels = extract_labels(get_game("Boxing"), jnp.asarray(np.stack([ram, enemy_knockout])))
+    assert np.asarray(labels["player_score"]).tolist() == [100, 37]
+    assert np.asarray(labels["enemy_score"]).tolist() == [bcd(int(ram[19])), 100]

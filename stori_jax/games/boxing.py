@@ -7,6 +7,7 @@ from stori_jax.games.base import (EventOutcome, EventRule, GameSpec, NO_EVENT, R
 
 PLAYER_X, ENEMY_X, PLAYER_Y, ENEMY_Y = 32, 33, 34, 35
 PLAYER_SCORE, ENEMY_SCORE = 18, 19  # BCD (ALE reads them as decimal scores)
+KNOCKOUT = 0xC0  # the score byte of a boxer who scored 100 (a knockout): ALE counts it as 100
 CLOCK_MINUTES, CLOCK_SECONDS = 16, 17  # minutes in the high nibble (the low one is 0xB), seconds in BCD
 PLAYER_COLOUR, ENEMY_COLOUR, RING_COLOUR, CLOCK_COLOUR = 1, 2, 3, 4
 INVISIBLE = 214  # colour value that makes a sprite the ring background colour
@@ -80,13 +81,19 @@ EVENTS = {
                  pre_frame=_displace_to_corners),
 }
 
+def boxing_score(byte):
+    """A boxer's score from its byte: BCD 0..99, and 100 for a knockout (0xC0, which BCD would
+    read as 120), as ALE's reward counts it."""
+    return bcd(byte) - 20 * (byte == KNOCKOUT)
+
+
 LABELS = {
     "player_x": lambda ram: ram[..., PLAYER_X],
     "player_y": lambda ram: ram[..., PLAYER_Y],
     "enemy_x": lambda ram: ram[..., ENEMY_X],
     "enemy_y": lambda ram: ram[..., ENEMY_Y],
-    "player_score": lambda ram: bcd(ram[..., PLAYER_SCORE]),
-    "enemy_score": lambda ram: bcd(ram[..., ENEMY_SCORE]),
+    "player_score": lambda ram: boxing_score(ram[..., PLAYER_SCORE]),
+    "enemy_score": lambda ram: boxing_score(ram[..., ENEMY_SCORE]),
     "clock_minutes": lambda ram: ram[..., CLOCK_MINUTES] >> 4,
     "clock_seconds": lambda ram: bcd(ram[..., CLOCK_SECONDS]),
     **byte_labels(["player_colour", "enemy_colour", "ring_colour", "clock_colour"],
