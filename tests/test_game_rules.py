@@ -280,12 +280,15 @@ def test_breakout_block_hit_cancel(mode):
     start = make_ram({i: 255 for i in range(36)})
     prev = start.copy()
     prev[7] = 0  # an older hit: differs from start, not from prev
+    prev[11] = 0b1111_1110  # a block of byte 11 was hit earlier (not cancelled)
     ram = prev.copy()
     ram[3] = 127
     ram[20] = 0
+    ram[11] = 0b1111_1100  # another block of byte 11 is hit now
     ram[40] = 9  # outside the block RAM: ignored
     out = post(rule, prev, ram, start, u=BELOW)
-    assert out.fired and out.writes == {3: 255, 20: 255}
+    # the previous values come back: byte 11's older hit stays (its start value would respawn it)
+    assert out.fired and out.writes == {3: 255, 20: 255, 11: 0b1111_1110}
     assert out.zero_reward == (mode == 2) and not out.cancel_next_reward
     assert post(rule, prev, ram, start, u=AT) == NO_EVENT
     assert post(rule, prev, ram, start, u=0.0, p=0.0) == NO_EVENT
