@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from stori_jax import ActionNoise, ConceptDrift, Config, RandomEvent
+from stori_jax import ActionNoise, ConceptDrift, Config, ObservationMask, RandomEvent
 
 from _env_support import NOOP, make, random_actions, run_env
 
@@ -88,6 +88,31 @@ def test_without_autoreset_the_step_after_the_end_resets():
     np.testing.assert_array_equal(ram[10], run.reset_info["ram"])
     assert not run.stacked("reward")[10].any()
     np.testing.assert_array_equal(ram[11], ram[0])
+
+
+def test_without_autoreset_the_final_observation_ends_its_episode_stack_and_concept():
+    """autoreset=False, atari84, Boxing cut at 200 frames (50 steps) under sudden drift (T = 3)
+    to the clock's blackout at p = 1: the step that ends the episode returns its last four frames (the
+    stack goes on, it does not restart there) and concept 2's mask; the reset step after it
+    starts a new stack (one frame four times) under concept 1."""
+    config = Config(drift=ConceptDrift("sudden", 3, Config(
+        observation=ObservationMask("blackout", 8, 1.0))))
+    env = make("Boxing", config, obs="atari84", max_episode_frames=200, autoreset=False)
+    try:
+        run = run_env(env, random_actions(env.num_actions, 52, 2, seed=0))
+    finally:
+        env.close()
+    obs, done = run.stacked("obs"), run.done
+    np.testing.assert_array_equal(done[:, 0], np.arange(52) == 49)
+    final, before, first = obs[49], obs[48], obs[50]
+    np.testing.assert_array_equal(final[..., :3], before[..., 1:])  # the stack went on
+    for b in range(2):
+        assert not (final[b][..., 0] == final[b][..., 3]).all(), b
+        assert all((first[b][..., i] == first[b][..., 0]).all() for i in range(4)), b
+    masked = run.stacked("obs_masked")
+    assert masked[3:50].all() and not masked[:3].any() and not masked[50:].any()
+    np.testing.assert_array_equal(run.stacked("concept")[:, 0], (np.arange(52) >= 3)
+                                  & (np.arange(52) < 50))
 
 
 @pytest.mark.parametrize("inline_envs", [0, 1])
