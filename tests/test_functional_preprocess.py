@@ -11,8 +11,8 @@ import pytest
 
 from _env_support import new_ale
 
-from stori_jax.functional import (atari84_frame, dreamer64, max_pool, push_frame, reset_stack,
-                                  to_gray)
+from stori_jax.functional import (atari84_frame, dreamer64, max_pool, pool_screens, push_frame,
+                                  reset_stack, to_gray)
 from stori_jax.functional.preprocess import area_resize
 
 H, W = 210, 160
@@ -208,3 +208,17 @@ def test_preprocess_jit_and_vmap():
     np.testing.assert_array_equal(np.asarray(jax.jit(jax.vmap(max_pool))(frames)),
                                   np.maximum(np.asarray(frames)[:, :, 0],
                                              np.asarray(frames)[:, :, 1]))
+
+
+def test_pool_screens_of_each_frames_layout():
+    """``pair`` (2, B, H, W, 3) is the pixel-wise max of the two screens, ``pooled`` is itself and
+    ``pooled_chw`` (B, 3, H, W) is moved to channels last; an unknown layout is refused."""
+    pair = np.random.default_rng(0).integers(0, 256, (2, 3, 210, 160, 3), dtype=np.uint8)
+    pooled = np.maximum(pair[0], pair[1])
+    assert (pooled != pair[1]).any() and (pooled != pair[0]).any()
+    np.testing.assert_array_equal(pool_screens(jnp.asarray(pair), "pair"), pooled)
+    np.testing.assert_array_equal(pool_screens(jnp.asarray(pooled), "pooled"), pooled)
+    chw = np.ascontiguousarray(pooled.transpose(0, 3, 1, 2))
+    np.testing.assert_array_equal(pool_screens(jnp.asarray(chw), "pooled_chw"), pooled)
+    with pytest.raises(ValueError, match="frames layout must be one of"):
+        pool_screens(jnp.asarray(pooled), "planar")
