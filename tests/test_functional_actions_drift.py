@@ -318,9 +318,14 @@ def test_the_pure_functions_refuse_bad_parameters_and_take_traced_ones():
 # Keys and event uniforms
 # ---------------------------------------------------------------------------------------------
 
-def test_env_keys_independent_of_batch_size():
+@pytest.mark.parametrize("partitionable", [True, False])
+def test_env_keys_independent_of_batch_size(partitionable):
+    """Env i's key is a function of (step key, i) alone, under either threefry setting (a
+    split of the step key into B keys is not: its first k keys change with B when
+    jax_threefry_partitionable is off)."""
     step_key = jax.random.PRNGKey(3)
-    big, small = np.asarray(env_keys(step_key, 8)), np.asarray(env_keys(step_key, 3))
+    with jax.threefry_partitionable(partitionable):
+        big, small = np.asarray(env_keys(step_key, 8)), np.asarray(env_keys(step_key, 3))
     np.testing.assert_array_equal(big[:3], small)
     assert len({tuple(k) for k in big}) == 8
     a = np.asarray(purpose_keys(env_keys(step_key, 8), Purpose.ACTIONS))
