@@ -8,6 +8,7 @@ import dataclasses
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from baselines.run_evidence import RESULTS as BASELINE_RESULTS
@@ -52,6 +53,36 @@ def test_the_committed_table_is_what_the_recorded_evaluations_give():
 
     rebuilt = markdown(aggregate(load_evaluations(BASELINE_RESULTS / "runs")))
     assert rebuilt == (BASELINE_RESULTS / "table.md").read_text()
+
+
+def test_a_recorded_random_evaluation_replays_from_its_seed():
+    """The recorded random-policy evaluations are this code's: the first episode of each of the
+    20 envs of Breakout 1 (type-1 action corruption), seed 0, replays exactly, which pins the
+    env's random streams, the agent's key and the emulator to the published numbers. Only with
+    the jax and ale-py versions that recorded it (other versions may draw or emulate otherwise:
+    docs/reproducibility.md)."""
+    from importlib.metadata import version
+
+    from baselines.evaluate import evaluate
+    from stori_jax.suite import episode_quotas
+
+    from baselines.run_evidence import run_dir
+
+    recorded = json.loads((run_dir("Breakout", "1", "random", 0) / "eval-random.json")
+                          .read_text())
+    made_with = recorded["software"]["packages"]
+    for package in ("jax", "jaxlib", "ale-py"):
+        if version(package) != made_with[package]:
+            pytest.skip(f"recorded with {package} {made_with[package]}, {version(package)} is "
+                        "installed")
+    num_envs = recorded["num_envs"]
+    replay = evaluate("Breakout", "1", policy="random", episodes=num_envs, num_envs=num_envs,
+                      seed=0, progress=False)
+    quotas = episode_quotas(recorded["episodes"], num_envs)
+    firsts = np.cumsum(quotas) - quotas  # where each env's episodes start in the flat list
+    assert replay["eval_seed"] == recorded["eval_seed"]
+    assert replay["lengths"] == [recorded["lengths"][i] for i in firsts]
+    assert replay["returns"] == [recorded["returns"][i] for i in firsts]
 
 
 def test_the_readme_shows_the_committed_table():
