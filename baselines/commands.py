@@ -223,7 +223,7 @@ def cmd_eval(args) -> int:
     if args.eval_seed is None:  # the default eval seed must be a valid seed too
         check_int("--seed + 10000 (the default --eval-seed)", seed + EVAL_SEED_OFFSET, 0,
                   MAX_SEED)
-    if policy == "greedy" and not stori_jax.preset(game, preset).components():
+    if policy == "greedy" and stori_jax.preset(game, preset).is_deterministic():
         print(f"note: {game} {preset} has no randomness once the policy is greedy, so every "
               "episode plays the same (sampled evaluation varies)")
     result = evaluate(game, preset, policy=policy, episodes=args.episodes, seed=seed,

@@ -78,10 +78,13 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100,
     game = stori_game(game)  # one spelling per game (and preset) in the results
     preset = canonical_preset(game, preset)
     num_envs = min(num_envs, episodes)
+    trained = {}  # how far the checkpoint's run had trained (a table notes other budgets)
     if checkpoint is not None:
-        from baselines.ppo import load_policy
+        from baselines.ppo import load_checkpoint, policy_of, training_progress
 
-        config, choose = load_policy(checkpoint, policy)
+        ckpt = load_checkpoint(checkpoint)
+        config, choose = policy_of(ckpt, policy)
+        trained = training_progress(ckpt)
         if (config.game, config.preset) != (game, preset):
             raise ValueError(f"checkpoint {checkpoint} was trained on {config.game} "
                              f"{config.preset}, not {game} {preset}")
@@ -133,7 +136,7 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100,
     return dict(game=game, preset=preset, agent="random" if policy == "random" else "ppo",
                 policy=policy, train_seed=seed, eval_seed=eval_seed, episodes=episodes,
                 num_envs=num_envs, max_episode_frames=max_episode_frames,
-                checkpoint=None if checkpoint is None else str(checkpoint),
+                checkpoint=None if checkpoint is None else str(checkpoint), **trained,
                 mean_return=float(np.mean(flat)), std_return=float(np.std(flat)),
                 returns=flat, lengths=[n for env_lengths in lengths for n in env_lengths],
                 truncated=cut_off,

@@ -713,9 +713,23 @@ def env_only_sps(config: PPOConfig, agent_steps: int = 2048) -> float:
 def load_policy(checkpoint: Path, mode: str = "sampled"):
     """(config, policy(obs, key) -> (B,) int32 actions) of a checkpoint, acting ``sampled``
     (from its distribution) or ``greedy`` (argmax), jitted."""
+    return policy_of(load_checkpoint(checkpoint), mode)
+
+
+def training_progress(ckpt: dict) -> dict:
+    """How far a checkpoint's run had trained: ``trained_agent_steps``, the run's budget
+    ``run_total_steps`` (its config's total_steps) and whether the run had finished."""
+    config = PPOConfig.from_recorded(ckpt["config"])
+    iterations = int(ckpt.get("iteration", 0))
+    return dict(trained_agent_steps=iterations * config.batch_size,
+                run_total_steps=config.total_steps,
+                run_finished=iterations >= config.num_iterations)
+
+
+def policy_of(ckpt: dict, mode: str = "sampled"):
+    """:func:`load_policy` of a loaded checkpoint payload."""
     if mode not in CHECKPOINT_POLICIES:
         raise ValueError(f"mode must be one of {list(CHECKPOINT_POLICIES)}, got {mode!r}")
-    ckpt = load_checkpoint(checkpoint)
     config = PPOConfig.from_recorded(ckpt["config"])
     import stori_jax
 

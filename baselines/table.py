@@ -49,6 +49,18 @@ PAPER_RESULTS = {  # (game, preset): (DreamerV3 mean, std, STORM mean, std)
     ("BankHeist", "3.1"): (562.30, 320.74, 1015.73, 148.43),
     ("BankHeist", "3.2"): (849.80, 514.15, 43.10, 22.85),
 }
+PAPER_AGENT_STEPS = 100_000  # the paper's training budget per run
+# presets whose environment here differs from the reference's that made the paper's numbers
+# (STORI_SPEC marks the reference's defects, which this project does not repeat)
+PAPER_ENVIRONMENT_DIFFERS = {
+    ("Gopher", "2.1"): "the reference's 'hole stays open' rule mostly undid the gopher's "
+                       "digging (STORI_SPEC section 7, the likely cause of DreamerV3's 11333); "
+                       "here it undoes only the farmer's fills",
+    ("BankHeist", "2.1"): "the reference's city switch dropped the player back to an early "
+                          "level; here the level is kept (STORI_SPEC section 8)",
+    **{(game, "2.2"): "the reference's sudden drift switched to concept 2 one agent step "
+                      "early (at T - 1; STORI_SPEC section 3)" for game in ("Breakout", "Boxing")},
+}
 EVAL_KEYS = ("game", "preset", "agent", "policy", "train_seed", "mean_return", "episodes")
 AGENTS = ("ppo", "random")  # the table's agent columns, PPO and Random
 
@@ -145,6 +157,7 @@ def aggregate(evaluations: list[dict], ppo_policy: str = "sampled") -> list[dict
                 # None where an older evaluation did not record it
                 max_episode_frames=[seeds[s].get("max_episode_frames") for s in sorted(seeds)],
                 truncated=[seeds[s].get("truncated") for s in sorted(seeds)],
+                training=[_training(seeds[s]) for s in sorted(seeds)],
                 mean=float(np.mean(means)) if means else None,
                 std=float(np.std(means, ddof=1)) if len(means) > 1 else None)
         paper = PAPER_RESULTS.get((game, preset))
@@ -152,6 +165,25 @@ def aggregate(evaluations: list[dict], ppo_policy: str = "sampled") -> list[dict
         row["STORM"] = None if paper is None else dict(mean=paper[2], std=paper[3])
         rows.append(row)
     return rows
+
+
+def _training(evaluation: dict) -> dict | None:
+    """How far the evaluated checkpoint's run had trained (``trained_agent_steps``,
+    ``run_total_steps``, ``run_finished``): as the evaluation recorded it, or, for an older one
+    that did not, from the ``summary.json`` of the run it lies in; None where neither says
+    (and for the random policy)."""
+    keys = ("trained_agent_steps", "run_total_steps", "run_finished")
+    if evaluation["agent"] != "ppo":
+        return None
+    if all(k in evaluation for k in keys):
+        return {k: evaluation[k] for k in keys}
+    try:
+        summary = json.loads((Path(evaluation["path"]).parent / "summary.json").read_text())
+        return dict(trained_agent_steps=int(summary["agent_steps"]),
+                    run_total_steps=int(summary["config"]["total_steps"]),
+                    run_finished=bool(summary["finished"]))
+    except (OSError, ValueError, KeyError, TypeError):  # none, or not one of ours
+        return None
 
 
 def _order(game: str, preset: str):
@@ -169,8 +201,10 @@ def _cell(entry) -> str:
     return f"{entry['mean']:.2f} ± {entry['std']:.2f}"
 
 
-def markdown(rows: list[dict]) -> str:
-    lines = ["| game | preset | PPO (ours) | Random (ours) | DreamerV3 (paper) | STORM (paper) | "
+def markdown(rows: list[dict], ppo_policy: str = "sampled") -> str:
+    """The table; its PPO column names the policy where it is not the default, sampled."""
+    ppo = "PPO (ours)" if ppo_policy == "sampled" else f"PPO {ppo_policy} (ours)"
+    lines = [f"| game | preset | {ppo} | Random (ours) | DreamerV3 (paper) | STORM (paper) | "
              "seeds (PPO) | episodes per seed |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         seeds = ", ".join(str(s) for s in r["PPO"]["seeds"])
@@ -265,6 +299,20 @@ def evaluation_notes(rows: list[dict]) -> list[str]:
     (an older evaluation that did not record its cap is left out of that comparison)."""
     notes = []
     for r in rows:
+        if r["PPO"]["seeds"] and (r["game"], r["preset"]) in PAPER_ENVIRONMENT_DIFFERS:
+            notes.append(f"{r['game']} {r['preset']}: the paper's numbers come from another "
+                         f"environment: {PAPER_ENVIRONMENT_DIFFERS[r['game'], r['preset']]}")
+        for seed, training in zip(r["PPO"]["seeds"], r["PPO"]["training"]):
+            if training is None:
+                continue
+            what = f"{r['game']} {r['preset']} PPO seed {seed}"
+            if not training["run_finished"]:
+                notes.append(f"{what}: its checkpoint is from an unfinished run (trained "
+                             f"{training['trained_agent_steps']} of its "
+                             f"{training['run_total_steps']} agent steps)")
+            if training["run_total_steps"] != PAPER_AGENT_STEPS:
+                notes.append(f"{what}: trained for a budget of {training['run_total_steps']} "
+                             f"agent steps, the paper's for {PAPER_AGENT_STEPS}")
         caps = set()
         for column in ("PPO", "Random"):
             cell = r[column]
@@ -296,8 +344,11 @@ def table_notes(curves: dict, evaluations: list[dict], ppo_policy: str) -> list[
                          "in the curves, not in the table")
         settings = {json.dumps(_hyperparameters(config), sort_keys=True) for *_, config in runs}
         if len(settings) > 1:
-            notes.append(f"{game} {preset}: the curves pool runs with different hyperparameters "
-                         "(their config.json files differ beyond the seed)")
+            configs = [_hyperparameters(config) for *_, config in runs]
+            differ = sorted(k for k in set().union(*configs)
+                            if len({json.dumps(c.get(k)) for c in configs}) > 1)
+            notes.append(f"{game} {preset}: the runs pooled in the curves (and, where "
+                         f"evaluated, in the table's mean) differ in {', '.join(differ)}")
     return notes
 
 
@@ -377,7 +428,7 @@ def build_table(results_dir: Path, out_dir: Path | None = None,
     notes = table_notes(curves, evaluations, ppo_policy) + evaluation_notes(rows)
     for note in notes:
         print(f"stori-jax table: note: {note}", file=sys.stderr)
-    text = markdown(rows)
+    text = markdown(rows, ppo_policy)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "table.md").write_text(text + "".join(f"\n- {note}" for note in notes)
                                       + ("\n" if notes else ""))

@@ -23,7 +23,7 @@ from typing import Any, Mapping
 
 from .checks import MAX_INT32, check_int, check_probability
 from .games import get_game
-from .games.base import CROP_MODES
+from .games.base import CROP_MODES, TORCH_MODE
 
 GRANULARITIES = ("frame", "step")
 DRIFT_SCHEDULES = ("sudden", "cyclic", "gradual")
@@ -242,6 +242,19 @@ class Config:
                 if part is not None:
                     out.append((name, part, True))
         return out
+
+    def is_deterministic(self) -> bool:
+        """True when nothing here draws at random: no action noise or event at p > 0, masks
+        only at p 0 or 1 and never the torch (its centre is drawn), no gradual drift. The env
+        then plays the same game from every seed under the same actions (its emulators have no
+        randomness of their own without sticky actions)."""
+        for _, part, _ in self.components():
+            if isinstance(part, ObservationMask):
+                if part.prob not in (0.0, 1.0) or (part.kind == "crop" and part.mode == TORCH_MODE):
+                    return False
+            elif part.prob > 0:
+                return False
+        return self.drift is None or self.drift.schedule != "gradual"
 
     def describe(self) -> str:
         bits = []

@@ -707,6 +707,15 @@ def test_a_checkpoints_evaluation_is_filed_under_its_training_seed(uninterrupted
               max_episode_frames=40, progress=False)
     result = evaluate("Breakout", "1", **kw)
     assert (result["train_seed"], result["eval_seed"]) == (7, 10_007)
+    config = ppo.PPOConfig.from_recorded(payload["config"])
+    assert payload["iteration"] == config.num_iterations  # the run had finished
+    assert (result["trained_agent_steps"], result["run_total_steps"], result["run_finished"]) \
+        == (config.num_iterations * config.batch_size, config.total_steps, True)
+    payload["iteration"] -= 1  # a checkpoint from before the run's end
+    ppo.save_checkpoint(tmp_path / "checkpoint.pkl", payload)
+    result = evaluate("Breakout", "1", **kw)
+    assert (result["trained_agent_steps"], result["run_finished"]) == (
+        (config.num_iterations - 1) * config.batch_size, False)
     assert evaluate("Breakout", "1", seed=7, **kw)["eval_seed"] == 10_007
     with pytest.raises(ValueError, match=r"seed 0 differs from the training seed 7 of "
                                          r"checkpoint .* give eval_seed"):
@@ -868,6 +877,39 @@ def test_the_table_notes_evaluations_cut_off_at_the_frame_cap(tmp_path, capsys):
         build_table(tmp_path, tmp_path / "out")
 
 
+def test_the_table_notes_other_budgets_unfinished_runs_and_the_papers_other_environments(
+        tmp_path):
+    """A checkpoint of an unfinished run, or a run of another budget than the paper's 100k,
+    stood in the table beside the paper's numbers without a word, and so did the paper's
+    numbers of presets whose reference environment had a defect this project corrects. An
+    older evaluation that did not record its training is read from its run's summary.json."""
+    def ppo_eval(seed, **training):
+        write_result(dict(game="Gopher", preset="2.1", agent="ppo", policy="sampled",
+                          train_seed=seed, mean_return=50.0, episodes=2, **training),
+                     tmp_path / f"ppo-seed{seed}")
+
+    ppo_eval(0, trained_agent_steps=100_352, run_total_steps=100_000, run_finished=True)
+    ppo_eval(7, trained_agent_steps=1_024, run_total_steps=12_288, run_finished=False)
+    ppo_eval(13)
+    (tmp_path / "ppo-seed13" / "summary.json").write_text(json.dumps(dict(
+        config=dict(total_steps=1_000_000), agent_steps=1_001_472, finished=True)))
+    fake_eval(tmp_path, "Breakout", "3.1", "ppo", 0, 1.0)  # no word of its training: no note
+    build_table(tmp_path, tmp_path / "out")
+    table = json.loads((tmp_path / "out" / "table.json").read_text())
+    assert table["notes"] == [
+        "Gopher 2.1: the paper's numbers come from another environment: the reference's "
+        "'hole stays open' rule mostly undid the gopher's digging (STORI_SPEC section 7, the "
+        "likely cause of DreamerV3's 11333); here it undoes only the farmer's fills",
+        "Gopher 2.1 PPO seed 7: its checkpoint is from an unfinished run (trained 1024 of its "
+        "12288 agent steps)",
+        "Gopher 2.1 PPO seed 7: trained for a budget of 12288 agent steps, the paper's for "
+        "100000",
+        "Gopher 2.1 PPO seed 13: trained for a budget of 1000000 agent steps, the paper's for "
+        "100000"]
+    assert table["rows"][-1]["PPO"]["training"][2] == dict(
+        trained_agent_steps=1_001_472, run_total_steps=1_000_000, run_finished=True)
+
+
 def test_the_table_joins_a_preset_spelt_in_lower_case_to_its_row(tmp_path):
     for seed, preset in ((0, "3.2C"), (7, "3.2c")):
         fake_eval(tmp_path, "Breakout", preset, "ppo", seed, 2.0 * seed)
@@ -890,7 +932,9 @@ def test_table_aggregates_seeds_beside_the_paper(tmp_path):
     assert lines[2].startswith("| Breakout | 3.1 | 2.00 ± 1.00 | 1.50 ± 0.00 | 60.71 ± 41.89 | "
                                "24.17 ± 3.55 | 0, 7, 13 | 100 |")
     assert lines[3].startswith("| Boxing | 1 | -4.00 (1 seed) | - | 39.32 ± 6.79 |")
-    assert "| 100.00 ± 0.00 |" in build_table(tmp_path, tmp_path / "g", ppo_policy="greedy")[0]
+    greedy = build_table(tmp_path, tmp_path / "g", ppo_policy="greedy")[0]
+    assert "| 100.00 ± 0.00 |" in greedy and "| PPO greedy (ours) |" in greedy
+    assert "| PPO (ours) |" in text
     assert (tmp_path / "out" / "curves-Breakout.png").stat().st_size > 1000
     assert json.loads((tmp_path / "out" / "table.json").read_text())["rows"][0]["PPO"][
         "per_seed"] == [1.0, 2.0, 3.0]
@@ -989,7 +1033,8 @@ def test_curves_stop_where_a_run_stopped_and_the_table_names_what_it_leaves_out(
     err = capsys.readouterr().err
     assert "Breakout 2.1: seed(s) [0] have no eval-sampled.json: in the curves, not in the " \
         "table" in err
-    assert "Breakout 2.1: the curves pool runs with different hyperparameters" in err
+    assert "Breakout 2.1: the runs pooled in the curves (and, where evaluated, in the table's " \
+        "mean) differ in learning_rate" in err
     # a config.json written before a field existed is that field's default, not another config
     for seed in (2, 3):
         run = tmp_path / "Boxing-3.1" / f"ppo-seed{seed}"
@@ -1230,11 +1275,14 @@ def test_cli_eval_says_a_greedy_policy_on_a_preset_without_randomness_plays_one_
     payload = read_checkpoint(full)
     payload["config"] = dict(payload["config"], preset="3.1")  # the same network plays 3.1
     ppo.save_checkpoint(tmp_path / "3.1" / "checkpoint.pkl", payload)
+    payload["config"] = dict(payload["config"], preset="3.2A")  # blackout at p = 1: no draw
+    ppo.save_checkpoint(tmp_path / "3.2A" / "checkpoint.pkl", payload)
     for checkpoint, noted in ((full / "checkpoint.pkl", False),
-                              (tmp_path / "3.1" / "checkpoint.pkl", True)):
+                              (tmp_path / "3.1" / "checkpoint.pkl", True),
+                              (tmp_path / "3.2A" / "checkpoint.pkl", True)):
         assert main(["eval", "--checkpoint", str(checkpoint), "--policy", "greedy",
                      "--episodes", "1", "--num-envs", "1", "--max-episode-frames", "40",
-                     "--out", str(tmp_path / str(noted)), "--quiet"]) == 0
+                     "--out", str(tmp_path / "out" / checkpoint.parent.name), "--quiet"]) == 0
         out = capsys.readouterr().out
         assert ("has no randomness once the policy is greedy" in out) == noted, out
 

@@ -313,3 +313,21 @@ def test_reference_mode_0_is_still_refused():
     d = {"stochasticity_type": "3.2", "partial_observation": {"type": "crop", "mode": "0"}}
     with pytest.raises(ValueError, match="mode"):
         Config.from_reference(d)
+
+
+def test_the_presets_without_a_random_draw():
+    """A preset draws nothing at random when it has no action noise or event, masks only at
+    p = 1 and no torch, and no gradual drift (eval's note that a greedy policy plays one
+    episode rests on it)."""
+    deterministic = {(game, name) for game, name in list_presets()
+                     if preset(game, name).is_deterministic()}
+    assert deterministic == {("Breakout", "2.2"), ("Breakout", "3.1"), ("Breakout", "3.2A"),
+                             ("Boxing", "3.1"), ("Boxing", "3.2A"), ("Gopher", "2.2"),
+                             ("Gopher", "3.1"), ("Gopher", "3.2"), ("BankHeist", "3.1")}
+    torch = Config(observation=ObservationMask("crop", 5, 1.0))
+    gradual = Config(drift=ConceptDrift("gradual", 10, Config(
+        observation=ObservationMask("blackout", 1, 1.0))))
+    never = Config(action_noise=ActionNoise(0.0), event=RandomEvent(1, 0.0),
+                   observation=ObservationMask("crop", 1, 0.0))
+    assert not torch.is_deterministic() and not gradual.is_deterministic()
+    assert never.is_deterministic()
