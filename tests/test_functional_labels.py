@@ -132,3 +132,22 @@ def test_boxing_knockout_scores_100_on_real_ram():
     labels = extract_labels(get_game("Boxing"), jnp.asarray(np.stack([ram, enemy_knockout])))
     assert np.asarray(labels["player_score"]).tolist() == [100, 37]
     assert np.asarray(labels["enemy_score"]).tolist() == [bcd(int(ram[19])), 100]
+
+
+@pytest.mark.parametrize("ram, error", [
+    (np.zeros((1, 10), np.uint8), r"shape \(\.\.\., 128\) .* got shape \(1, 10\)"),
+    (np.zeros((128, 3), np.uint8), r"got shape \(128, 3\)"),   # a batch transposed
+    (np.uint8(7), r"got shape \(\)"),
+    (np.zeros((2, 128), np.int8), "as uint8 .* got dtype int8"),
+    (np.zeros((2, 128), np.float32), "got dtype float32"),
+    (np.zeros((2, 128), bool), "got dtype bool"),
+])
+def test_extract_labels_refuses_what_is_not_ram(ram, error):
+    """RAM of the wrong length read clamped addresses (a 10-byte row gave BankHeist's robber_x
+    from byte 9), a transposed batch gave 128 rows of labels, and int8 RAM decoded scores as
+    negative numbers: each is now a ValueError naming the shape or dtype."""
+    with pytest.raises(ValueError, match=error):
+        extract_labels("BankHeist", ram)
+    for ok in (np.zeros((2, 128), np.uint8), np.zeros((3, 2, 128), np.int32),
+               np.zeros(128, np.uint16)):
+        assert extract_labels("BankHeist", ok)["robber_x"].shape == ok.shape[:-1]

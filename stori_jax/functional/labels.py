@@ -3,13 +3,25 @@
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
+
+RAM_SIZE = 128  # bytes of an Atari 2600's RAM
 
 
 def extract_labels(game, ram) -> dict:
-    """{label: (B,) int32} from ram (B, 128) for ``game`` (its name, or its GameSpec)."""
+    """{label: (...) int32} from ram (..., 128) for ``game`` (its name, or its GameSpec): the
+    RAM bytes as uint8 (or a wider integer type holding them)."""
     if isinstance(game, str):
         from stori_jax.games import get_game
 
         game = get_game(game)  # a clear error for a game that is none
-    ram = jnp.asarray(ram).astype(jnp.int32)
+    ram = jnp.asarray(ram)
+    dtype = np.dtype(ram.dtype)
+    if ram.ndim == 0 or ram.shape[-1] != RAM_SIZE:
+        raise ValueError(f"ram must be an array of shape (..., {RAM_SIZE}) (the RAM bytes of "
+                         f"each env), got shape {tuple(ram.shape)}")
+    if dtype.kind not in "ui" or dtype == np.int8:
+        raise ValueError(f"ram must hold the RAM bytes as uint8 (or a wider integer type), got "
+                         f"dtype {dtype}")
+    ram = ram.astype(jnp.int32)
     return {name: jnp.asarray(fn(ram), jnp.int32) for name, fn in game.labels.items()}
