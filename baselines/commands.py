@@ -105,6 +105,7 @@ def cmd_train(args) -> int:
     from baselines.ppo import PPOConfig, train
     from stori_jax.checks import check_int
     from stori_jax.cli import check_out
+    from stori_jax.folders import removed_if_left_empty
 
     check_int("--eval-episodes", args.eval_episodes, 0)
     overrides = _parse_overrides(args.overrides)
@@ -147,27 +148,38 @@ def cmd_train(args) -> int:
         print(f"stori-jax: --steps {config.total_steps} rounds up to {trained} agent steps, whole "
               f"iterations of num_envs x num_steps = {config.batch_size}", file=sys.stderr)
     try:
-        summary = train(config, out, resume=args.resume, progress=not args.quiet)
+        with removed_if_left_empty(out):  # a run stopped before writing anything leaves nothing
+            summary = train(config, out, resume=args.resume, progress=not args.quiet)
     except KeyboardInterrupt:
         if (out / "checkpoint.pkl").exists():
             print(f"stori-jax: the last checkpoint is in {out}; continue with the same command "
                   "and --resume", file=sys.stderr)
         raise
-    if summary["iterations_now"] == 0:
+    now = summary["iterations_now"] * config.batch_size
+    if now == 0:
         print(f"nothing to train: {out} holds a finished run of {summary['agent_steps']} agent "
               "steps (a run trains to its --steps; a longer one starts in another --out)")
     else:
-        print(f"trained {summary['agent_steps']} agent steps in "
+        resumed = (f"resumed at agent step {summary['agent_steps'] - now}, trained {now}; "
+                   if now < summary["agent_steps"] else "")
+        print(f"{resumed}the run: {summary['agent_steps']} agent steps in "
               f"{summary['train_seconds']:.0f} s ({summary['train_sps']:.0f} steps/s); wrote "
               f"{out}/config.json, log.csv, episodes.csv, checkpoint.pkl, summary.json")
     if args.eval_episodes:
         result = evaluate(config.game, config.preset, policy="sampled", seed=config.seed,
                           episodes=args.eval_episodes, checkpoint=out / "checkpoint.pkl",
                           progress=not args.quiet)
-        print(f"eval: mean return {result['mean_return']:.2f} over {args.eval_episodes} "
-              f"episodes; wrote {write_result(result, out)}")
+        print(f"eval: {describe_result(result)}; wrote {write_result(result, out)}")
         print_truncated(result)
     return 0
+
+
+def describe_result(result: dict) -> str:
+    """One line of an evaluation's outcome, as `eval` and `train --eval-episodes` print it."""
+    episodes = result["episodes"]
+    return (f"{result['game']} {result['preset']} {result['policy']}: mean return "
+            f"{result['mean_return']:.2f} ± {result['std_return']:.2f} (std over {episodes} "
+            f"episode{'s' * (episodes != 1)}, eval seed {result['eval_seed']})")
 
 
 def cmd_eval(args) -> int:
@@ -229,10 +241,7 @@ def cmd_eval(args) -> int:
     result = evaluate(game, preset, policy=policy, episodes=args.episodes, seed=seed,
                       eval_seed=args.eval_seed, num_envs=args.num_envs, checkpoint=checkpoint,
                       max_episode_frames=args.max_episode_frames, progress=not args.quiet)
-    print(f"{game} {preset} {policy}: mean return {result['mean_return']:.2f} ± "
-          f"{result['std_return']:.2f} (std over {args.episodes} "
-          f"episode{'s' * (args.episodes != 1)}, eval seed "
-          f"{result['eval_seed']}); wrote {write_result(result, out)}")
+    print(f"{describe_result(result)}; wrote {write_result(result, out)}")
     print_truncated(result)
     return 0
 

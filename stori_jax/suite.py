@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from stori_jax.folders import removed_if_left_empty
 from stori_jax.provenance import software
 
 
@@ -170,32 +171,27 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
             raise ValueError(f"--checkpoint {checkpoint} plays {trained_on} only; choose its "
                              f"presets with --games {trained_on} (asked for {others})")
         agent = str(checkpoint)
-    created = [d for d in (out, *out.parents) if not d.exists()]  # the deepest first
-    out.mkdir(parents=True, exist_ok=True)
     rows, written = [], [out / "results.json", out / "table.md"]
     # the sheets wait in a hidden folder until the run has finished: an interrupted run leaves
-    # the earlier run's gallery, table and JSON as they were, not a mix of two runs
-    staging = Path(tempfile.mkdtemp(dir=out, prefix=".suite-partial-"))
-    try:
-        for game, name in tqdm(presets, desc="suite", unit="preset", disable=not progress):
-            rows.append(run_preset(game, name, episodes=episodes, num_envs=num_envs,
-                                   max_steps=max_steps, seed=seed, policy=policy,
-                                   progress=progress))
-            if gallery:
-                contact_sheet(game, name, stori_jax.preset(game, name),
-                              sheet_path(staging, game, name), seed=seed)
-        for game, name in presets if gallery else ():
-            written.append(sheet_path(out, game, name))
-            written[-1].parent.mkdir(exist_ok=True)
-            os.replace(sheet_path(staging, game, name), written[-1])
-    except BaseException:  # an interrupted first run leaves no empty folder behind either
-        shutil.rmtree(staging, ignore_errors=True)
-        for folder in created:
-            if folder.is_dir() and not any(folder.iterdir()):
-                folder.rmdir()
-        raise
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
+    # the earlier run's gallery, table and JSON as they were, not a mix of two runs (and an
+    # interrupted first run no empty folder)
+    with removed_if_left_empty(out):
+        out.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(dir=out, prefix=".suite-partial-"))
+        try:
+            for game, name in tqdm(presets, desc="suite", unit="preset", disable=not progress):
+                rows.append(run_preset(game, name, episodes=episodes, num_envs=num_envs,
+                                       max_steps=max_steps, seed=seed, policy=policy,
+                                       progress=progress))
+                if gallery:
+                    contact_sheet(game, name, stori_jax.preset(game, name),
+                                  sheet_path(staging, game, name), seed=seed)
+            for game, name in presets if gallery else ():
+                written.append(sheet_path(out, game, name))
+                written[-1].parent.mkdir(exist_ok=True)
+                os.replace(sheet_path(staging, game, name), written[-1])
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
     (out / "results.json").write_text(json.dumps(dict(
         agent=agent or "random", seed=seed, episodes=episodes, num_envs=num_envs,
         max_steps=max_steps, software=made_with, rows=rows),

@@ -1287,6 +1287,32 @@ def test_cli_eval_says_a_greedy_policy_on_a_preset_without_randomness_plays_one_
         assert ("has no randomness once the policy is greedy" in out) == noted, out
 
 
+def test_cli_train_says_where_a_resumed_run_started_and_leaves_no_empty_folder(
+        tmp_path, monkeypatch, capsys):
+    """After --resume, train printed the whole run's steps as if this command had trained them
+    all; a Ctrl-C before anything was written left the new run folder behind, empty."""
+    def resumed(config, out, resume, progress):
+        return dict(iterations_now=2, agent_steps=3 * config.batch_size, train_seconds=9.0,
+                    train_sps=1.0)
+
+    monkeypatch.setattr(ppo, "train", resumed)
+    args = ["train", "ppo", "--game", "Breakout", "--set", "num_envs=2", "--set",
+            "num_steps=8", "--steps", "48", "--quiet"]
+    (tmp_path / "run" / "checkpoint.pkl").parent.mkdir()
+    (tmp_path / "run" / "checkpoint.pkl").write_bytes(b"")
+    assert main([*args, "--out", str(tmp_path / "run"), "--resume"]) == 0
+    assert "resumed at agent step 16, trained 32; the run: 48 agent steps in 9 s" in \
+        capsys.readouterr().out
+
+    def interrupted(config, out, resume, progress):
+        out.mkdir(parents=True)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ppo, "train", interrupted)
+    assert main([*args, "--out", str(tmp_path / "new" / "run")]) == 130  # Ctrl-C's exit code
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
 def test_cli_train_evaluates_the_sampled_policy_of_its_checkpoint(tmp_path, monkeypatch,
                                                                     capsys):
     """--eval-episodes N: after training, N episodes of the run's checkpoint acting `sampled`
@@ -1302,7 +1328,8 @@ def test_cli_train_evaluates_the_sampled_policy_of_its_checkpoint(tmp_path, monk
     def evaluate(game, preset, **kwargs):
         calls.append(dict(kwargs, game=game, preset=preset))
         return dict(game=game, preset=preset, agent="ppo", policy=kwargs["policy"],
-                    mean_return=1.0, truncated=0, episodes=kwargs["episodes"])
+                    mean_return=1.0, std_return=0.5, truncated=0, episodes=kwargs["episodes"],
+                    eval_seed=10_004)
 
     monkeypatch.setattr(ppo, "train", train)
     monkeypatch.setattr(baselines.evaluate, "evaluate", evaluate)
@@ -1312,7 +1339,8 @@ def test_cli_train_evaluates_the_sampled_policy_of_its_checkpoint(tmp_path, monk
     assert calls == [dict(game="Boxing", preset="3.2B", policy="sampled", seed=4, episodes=3,
                           checkpoint=tmp_path / "checkpoint.pkl", progress=False)]
     assert json.loads((tmp_path / "eval-sampled.json").read_text())["policy"] == "sampled"
-    assert "eval: mean return 1.00 over 3 episodes" in capsys.readouterr().out
+    assert "eval: Boxing 3.2B sampled: mean return 1.00 ± 0.50 (std over 3 episodes, eval " \
+        "seed 10004); wrote" in capsys.readouterr().out  # as `eval` prints it
     # a second evaluation replaces the first only with --force, and that is known before training
     (tmp_path / "checkpoint.pkl").write_bytes(b"")  # a run to --resume
     again = ["train", "ppo", "--game", "boxing", "--preset", "3.2b", "--seed", "4", "--steps",
