@@ -121,8 +121,9 @@ def selected_presets(games, presets):
     allowed = list(dict.fromkeys(n for _, n in in_games))
     unknown = [n for n in presets or [] if spelt_as_the_paper(n) not in allowed]
     if unknown:
+        named = list(dict.fromkeys(g for g, _ in in_games))  # the games as the paper spells them
         raise ValueError(f"--presets: unknown {unknown}; allowed"
-                         f"{' for ' + ' '.join(games) if games else ''}: {allowed}")
+                         f"{' for ' + ' '.join(named) if games else ''}: {allowed}")
     presets = presets and [spelt_as_the_paper(n) for n in presets]
     chosen = [(g, n) for g, n in in_games if not presets or n in presets]
     if not chosen:

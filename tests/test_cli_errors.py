@@ -129,7 +129,7 @@ def test_resume_from_a_checkpoint_without_its_run_state_says_what_is_missing(fil
 
 @pytest.mark.parametrize("argv, message", [
     (["suite", "--presets", "3.1", "9"], "--presets: unknown ['9']; allowed: ['1', '2.1'"),
-    (["suite", "--games", "Gopher", "--presets", "3.2A"],
+    (["suite", "--games", "gopher", "--presets", "3.2A"],
      "--presets: unknown ['3.2A']; allowed for Gopher: ['1', '2.1', '2.2', '3.1', '3.2']"),
     (["suite", "--seed", "-1"], "--seed must be in [0, 2147483647], got -1"),
     (["eval", "--random", "--game", "Breakout", "--preset", "3.1", "--policy", "greedy"],
