@@ -224,9 +224,12 @@ def cmd_eval(args) -> int:
                 except ValueError as error:
                     raise ValueError(f"--preset: {error}") from None
             if value is not None and value != trained:
+                hint = {"--seed": " (to evaluate on other seeds, give --eval-seed)",
+                        "--preset": " (eval plays the preset it was trained on; to play it on "
+                                    f"others, stori-jax suite --checkpoint {args.checkpoint} "
+                                    f"--games {config['game']} --presets {value})"}
                 raise ValueError(f"{flag} {value} differs from the checkpoint's {trained}"
-                                 + (" (to evaluate on other seeds, give --eval-seed)"
-                                    if flag == "--seed" else ""))
+                                 + hint.get(flag, ""))
         game, preset, policy = config["game"], config["preset"], args.policy or "sampled"
         seed = config["seed"]
         out, checkpoint = args.out or args.checkpoint.parent, args.checkpoint

@@ -1177,7 +1177,10 @@ def test_cli_train_refuses_to_overwrite_and_evaluates(uninterrupted, tmp_path, c
     assert main(["eval", "--checkpoint", str(full / "checkpoint.pkl"), "--episodes", "1",
                  "--policy", "greedy", "--num-envs", "1", "--out", str(tmp_path), "--quiet",
                  "--preset", "3.1", "--game", "breakout"]) == 2
-    assert "--preset 3.1 differs from the checkpoint" in capsys.readouterr().err  # not --game
+    err = capsys.readouterr().err
+    assert "--preset 3.1 differs from the checkpoint" in err  # not --game
+    assert f"stori-jax suite --checkpoint {full / 'checkpoint.pkl'} --games Breakout --presets " \
+        "3.1)" in err
     for flags, error in ((["--preset", "3.2c"], "--preset 3.2C differs from the checkpoint's 1"),
                          (["--preset", "9"], "--preset: unknown preset '9' for Breakout"),
                          (["--game", "Gopher", "--preset", "3.2A"],
