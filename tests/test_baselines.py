@@ -317,6 +317,56 @@ def test_each_epoch_visits_every_sample_once_in_minibatches_of_a_fresh_order(mon
     assert list(epochs[0]) != list(range(config.batch_size))
 
 
+def test_the_update_trains_on_the_gae_of_its_rollout_and_logs_the_mean_of_its_minibatches(
+        monkeypatch):
+    """Each minibatch's advantages and targets are GAE's (gamma and lambda as configured, the
+    bootstrap the value of the observation after the rollout) of its own samples; the logged
+    losses are the mean over epochs x minibatches, and the explained variance is the value
+    predictions' of the targets (the loss-lowering and loss tests pass with advantages and
+    targets swapped, gamma and lambda swapped, or either log wrong)."""
+    config = tiny(update_epochs=2, num_minibatches=4, gamma=0.9, gae_lambda=0.5)
+    t, b, n = config.num_steps, config.num_envs, config.batch_size
+    rng = np.random.default_rng(3)
+    ids = jnp.arange(n).reshape(t, b)  # each sample's frames: its index; n.. the last obs
+    table = rng.normal(size=n + b).astype(np.float32)
+    rollout = ppo.Rollout(obs=ids, action=jnp.asarray(rng.integers(0, 4, (t, b)), jnp.int32),
+                          logp=jnp.full((t, b), -np.log(4.0)), value=jnp.asarray(table[:n]
+                                                                                .reshape(t, b)),
+                          reward=jnp.asarray(rng.normal(size=(t, b)), jnp.float32),
+                          done=jnp.asarray(rng.random((t, b)) < 0.2))
+    params = dict(logits=jnp.zeros((n + b, 4)), value=jnp.asarray(table))
+    advantages, targets = reference_gae(np.asarray(rollout.reward, np.float64), table[:n]
+                                        .reshape(t, b).astype(np.float64),
+                                        np.asarray(rollout.done), table[n:].astype(np.float64),
+                                        0.9, 0.5)
+    seen, loss = [], ppo.ppo_loss
+
+    def spy(network, config, params, batch):
+        out = loss(network, config, params, batch)
+        jax.debug.callback(lambda *x: seen.append([np.asarray(v) for v in x]), batch[0],
+                           batch[4], batch[5], out[1]["pg_loss"], out[1]["v_loss"],
+                           ordered=True)
+        return out
+
+    monkeypatch.setattr(ppo, "ppo_loss", spy)
+    optimizer = ppo.make_optimizer(config)
+    update = ppo.make_update(TableNetwork(), optimizer, config)
+    *_, metrics = update(params, optimizer.init(params), rollout, jnp.arange(n, n + b),
+                         jax.random.PRNGKey(1))
+    metrics = jax.device_get(metrics)
+    jax.effects_barrier()
+    assert len(seen) == 8
+    for index, advantage, target, _, _ in seen:
+        np.testing.assert_allclose(advantage, advantages.reshape(-1)[index], rtol=1e-5,
+                                   atol=1e-5)
+        np.testing.assert_allclose(target, targets.reshape(-1)[index], rtol=1e-5, atol=1e-5)
+    for column, name in ((3, "pg_loss"), (4, "v_loss")):
+        np.testing.assert_allclose(metrics[name], np.mean([x[column] for x in seen]), rtol=1e-5)
+    residual = targets.reshape(-1) - table[:n]
+    np.testing.assert_allclose(metrics["explained_variance"],
+                               1 - residual.var() / targets.var(), rtol=1e-4)
+
+
 def test_gradients_are_clipped_to_max_grad_norm_before_adam():
     """Adam alone is nearly scale-free, so only its eps (1e-5, CleanRL's) shows the clipping:
     a gradient clipped to norm 1e-9 moves the parameters about 1e-4 as far as an unclipped
@@ -636,9 +686,25 @@ def test_the_log_counts_this_iterations_episodes_and_measures_speed_over_the_who
     monkeypatch.setattr(ppo, "save_checkpoint",
                         lambda path, payload: (saved.append(payload["iteration"]),
                                                save(path, payload)))
+    updates, make_update = [], ppo.make_update
+
+    def recording_make_update(*args):
+        update = make_update(*args)
+
+        def recorded(params, opt_state, rollout, last_obs, key):
+            updates.append((np.asarray(rollout.obs), np.asarray(last_obs)))
+            return update(params, opt_state, rollout, last_obs, key)
+        return recorded
+
+    monkeypatch.setattr(ppo, "make_update", recording_make_update)
     ppo.train(config, tmp_path, progress=False, stop_after=3)
     summary = ppo.train(config, tmp_path, progress=False, resume=True)
     assert saved == [2, 3, 4, 5]
+    # each update bootstraps from the observations after its rollout (step t + 1 of each env)
+    for i, (obs, last_obs) in enumerate(updates):
+        np.testing.assert_array_equal(last_obs[:, 0, 0, 0], (i + 1) * config.num_steps % 256)
+        np.testing.assert_array_equal(last_obs[:, 0, 0, 1], [0, 1, 2, 3])
+        np.testing.assert_array_equal(obs[-1][:, 0, 0, 0] + 1, last_obs[:, 0, 0, 0])
     with open(tmp_path / "episodes.csv", newline="") as f:
         episodes = [(int(r["global_step"]), int(r["env"]), float(r["return"]), int(r["length"]))
                     for r in csv.DictReader(f)]
