@@ -860,6 +860,11 @@ def test_evaluation_plays_each_envs_first_episodes_and_reports_their_mean_and_st
         key, k = jax.random.split(key)
         np.testing.assert_array_equal(used, k)
     assert len(keys) == 16
+    # fewer episodes than envs: only as many envs as episodes are made (the rest would play
+    # no counted episode)
+    result = evaluate("Breakout", "2.1", policy="random", episodes=2, num_envs=3, seed=5,
+                      max_episode_frames=1234, progress=False)
+    assert made[-1].made["num_envs"] == result["num_envs"] == 2
 
 
 def test_the_random_baseline_policy_is_uniform_over_the_games_actions():
@@ -1095,8 +1100,10 @@ def test_curves_stop_where_a_run_stopped_and_the_table_names_what_it_leaves_out(
                                           f"{last - 100},1,3.0,9\n")
         (run / "log.csv").write_text(f"iteration,global_step\n1,{last}\n")
     fake_eval(tmp_path, "Breakout", "2.1", "ppo", 1, 2.0)
+    fake_eval(tmp_path / "greedy", "Breakout", "2.1", "ppo", 0, 2.0, policy="greedy")
     build_table(tmp_path, tmp_path / "out")
     err = capsys.readouterr().err
+    # seed 0's greedy evaluation is not in the sampled table: the run is still left out
     assert "Breakout 2.1: seed(s) [0] have no eval-sampled.json: in the curves, not in the " \
         "table" in err
     assert "Breakout 2.1: the runs pooled in the curves (and, where evaluated, in the table's " \
@@ -1213,6 +1220,10 @@ def test_the_curves_legend_names_every_line_of_every_panel_in_one_colour_per_see
     (["eval"], "--checkpoint PATH or --random"),
     (["eval", "--random", "--game", "Breakout"], "--game and --preset"),
     (["eval", "--checkpoint", "/nonexistent.pkl"], "does not exist"),
+    (["eval", "--random", "--game", "Breakout", "--preset", "3.1", "--episodes", "0"],
+     "--episodes must be >= 1, got 0"),
+    (["eval", "--random", "--game", "Breakout", "--preset", "3.1", "--max-episode-frames",
+      "2147483648"], "--max-episode-frames must be in [1, 2147483647], got 2147483648"),
     (["table", "/nonexistent"], "not a directory"),
 ])
 def test_cli_errors_are_clear(argv, match, capsys):
