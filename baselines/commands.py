@@ -4,6 +4,7 @@ line, registered by :mod:`stori_jax.cli`."""
 from __future__ import annotations
 
 import dataclasses
+import shlex
 import sys
 from pathlib import Path
 
@@ -155,14 +156,15 @@ def cmd_train(args) -> int:
             print(f"stori-jax: the last checkpoint is in {out}; continue with the same command "
                   "and --resume", file=sys.stderr)
         raise
-    now = summary["iterations_now"] * config.batch_size
-    if now == 0:
+    trained_now = summary["iterations_now"] * config.batch_size
+    if trained_now == 0:
         print(f"nothing to train: {out} holds a finished run of {summary['agent_steps']} agent "
               "steps (a run trains to its --steps; a longer one starts in another --out)")
     else:
-        resumed = (f"resumed at agent step {summary['agent_steps'] - now}, trained {now}; "
-                   if now < summary["agent_steps"] else "")
-        print(f"{resumed}the run: {summary['agent_steps']} agent steps in "
+        resumed = (f"resumed at agent step {summary['agent_steps'] - trained_now}, trained "
+                   f"{trained_now}; the run: " if trained_now < summary["agent_steps"]
+                   else "trained ")
+        print(f"{resumed}{summary['agent_steps']} agent steps in "
               f"{summary['train_seconds']:.0f} s ({summary['train_sps']:.0f} steps/s); wrote "
               f"{out}/config.json, log.csv, episodes.csv, checkpoint.pkl, summary.json")
     if args.eval_episodes:
@@ -225,9 +227,11 @@ def cmd_eval(args) -> int:
                     raise ValueError(f"--preset: {error}") from None
             if value is not None and value != trained:
                 hint = {"--seed": " (to evaluate on other seeds, give --eval-seed)",
-                        "--preset": " (eval plays the preset it was trained on; to play it on "
-                                    f"others, stori-jax suite --checkpoint {args.checkpoint} "
-                                    f"--games {config['game']} --presets {value})"}
+                        "--preset": " (eval plays a checkpoint on the preset it was trained "
+                                    "on; stori-jax suite --checkpoint "
+                                    f"{shlex.quote(str(args.checkpoint))} --games "
+                                    f"{config['game']} --presets {value} plays its sampled "
+                                    "policy on others, in the suite's table, not this one's)"}
                 raise ValueError(f"{flag} {value} differs from the checkpoint's {trained}"
                                  + hint.get(flag, ""))
         game, preset, policy = config["game"], config["preset"], args.policy or "sampled"

@@ -716,14 +716,19 @@ def load_policy(checkpoint: Path, mode: str = "sampled"):
     return policy_of(load_checkpoint(checkpoint), mode)
 
 
+# how far an evaluated checkpoint's run had trained, as an evaluation records it
+TRAINING_KEYS = ("trained_agent_steps", "run_total_steps", "run_finished")
+
+
 def training_progress(ckpt: dict) -> dict:
-    """How far a checkpoint's run had trained: ``trained_agent_steps``, the run's budget
-    ``run_total_steps`` (its config's total_steps) and whether the run had finished."""
+    """How far a checkpoint's run had trained (TRAINING_KEYS): the agent steps trained, the
+    run's budget (its config's total_steps) and whether the run had finished; {} for a
+    checkpoint that does not say (no iteration count)."""
+    if not isinstance(ckpt.get("iteration"), int):
+        return {}
     config = PPOConfig.from_recorded(ckpt["config"])
-    iterations = int(ckpt.get("iteration", 0))
-    return dict(trained_agent_steps=iterations * config.batch_size,
-                run_total_steps=config.total_steps,
-                run_finished=iterations >= config.num_iterations)
+    return dict(zip(TRAINING_KEYS, (ckpt["iteration"] * config.batch_size, config.total_steps,
+                                    ckpt["iteration"] >= config.num_iterations)))
 
 
 def policy_of(ckpt: dict, mode: str = "sampled"):

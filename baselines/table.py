@@ -50,16 +50,14 @@ PAPER_RESULTS = {  # (game, preset): (DreamerV3 mean, std, STORM mean, std)
     ("BankHeist", "3.2"): (849.80, 514.15, 43.10, 22.85),
 }
 PAPER_AGENT_STEPS = 100_000  # the paper's training budget per run
-# presets whose environment here differs from the reference's that made the paper's numbers
-# (STORI_SPEC marks the reference's defects, which this project does not repeat)
+# presets whose paper numbers came from the reference's environment with a defect that changes
+# the game, which this project corrects (STORI_SPEC marks the reference's defects)
 PAPER_ENVIRONMENT_DIFFERS = {
     ("Gopher", "2.1"): "the reference's 'hole stays open' rule mostly undid the gopher's "
                        "digging (STORI_SPEC section 7, the likely cause of DreamerV3's 11333); "
                        "here it undoes only the farmer's fills",
     ("BankHeist", "2.1"): "the reference's city switch dropped the player back to an early "
                           "level; here the level is kept (STORI_SPEC section 8)",
-    **{(game, "2.2"): "the reference's sudden drift switched to concept 2 one agent step "
-                      "early (at T - 1; STORI_SPEC section 3)" for game in ("Breakout", "Boxing")},
 }
 EVAL_KEYS = ("game", "preset", "agent", "policy", "train_seed", "mean_return", "episodes")
 AGENTS = ("ppo", "random")  # the table's agent columns, PPO and Random
@@ -117,7 +115,7 @@ def load_evaluations(results_dir: Path) -> list[dict]:
         # one spelling per game and preset, so that 'breakout' '3.2c' joins Breakout 3.2C
         game = stori_game(result["game"])
         found.append(dict(result, game=game, preset=canonical_preset(game, result["preset"]),
-                          path=str(path)))
+                          path=str(path), training=_training(result, path)))
     if not found:
         raise ValueError(f"no eval-*.json under {results_dir}: run `stori-jax eval` first")
     return found
@@ -157,7 +155,7 @@ def aggregate(evaluations: list[dict], ppo_policy: str = "sampled") -> list[dict
                 # None where an older evaluation did not record it
                 max_episode_frames=[seeds[s].get("max_episode_frames") for s in sorted(seeds)],
                 truncated=[seeds[s].get("truncated") for s in sorted(seeds)],
-                training=[_training(seeds[s]) for s in sorted(seeds)],
+                training=[seeds[s]["training"] for s in sorted(seeds)],
                 mean=float(np.mean(means)) if means else None,
                 std=float(np.std(means, ddof=1)) if len(means) > 1 else None)
         paper = PAPER_RESULTS.get((game, preset))
@@ -167,22 +165,38 @@ def aggregate(evaluations: list[dict], ppo_policy: str = "sampled") -> list[dict
     return rows
 
 
-def _training(evaluation: dict) -> dict | None:
-    """How far the evaluated checkpoint's run had trained (``trained_agent_steps``,
-    ``run_total_steps``, ``run_finished``): as the evaluation recorded it, or, for an older one
-    that did not, from the ``summary.json`` of the run it lies in; None where neither says
-    (and for the random policy)."""
-    keys = ("trained_agent_steps", "run_total_steps", "run_finished")
-    if evaluation["agent"] != "ppo":
+def _training(result: dict, path: Path) -> dict | None:
+    """How far the evaluated checkpoint's run had trained (TRAINING_KEYS): as the evaluation
+    recorded it, or, for an older one, from the training run it lies in (its summary.json, or
+    its config.json and the last global_step of its log.csv); None where nothing says, and for
+    the random policy."""
+    from baselines.ppo import TRAINING_KEYS, PPOConfig
+
+    def checked(values) -> dict | None:
+        steps, total, finished = values
+        ok = (all(isinstance(v, int) and not isinstance(v, bool) and v >= 0
+                  for v in (steps, total)) and isinstance(finished, bool))
+        return dict(zip(TRAINING_KEYS, values)) if ok else None
+
+    if result["agent"] != "ppo":
         return None
-    if all(k in evaluation for k in keys):
-        return {k: evaluation[k] for k in keys}
+    if all(k in result for k in TRAINING_KEYS):
+        return checked([result[k] for k in TRAINING_KEYS])
+    run = path.parent
     try:
-        summary = json.loads((Path(evaluation["path"]).parent / "summary.json").read_text())
-        return dict(trained_agent_steps=int(summary["agent_steps"]),
-                    run_total_steps=int(summary["config"]["total_steps"]),
-                    run_finished=bool(summary["finished"]))
-    except (OSError, ValueError, KeyError, TypeError):  # none, or not one of ours
+        summary = json.loads((run / "summary.json").read_text())
+        return checked([summary["agent_steps"], summary["config"]["total_steps"],
+                        summary["finished"]])
+    except (OSError, ValueError, KeyError, TypeError):  # no finished run here, or not ours
+        pass
+    try:
+        config = PPOConfig.from_recorded(json.loads((run / "config.json").read_text()))
+        with open(run / "log.csv", newline="") as f:
+            rows = list(csv.DictReader(f))
+        steps = int(rows[-1]["global_step"]) if rows else 0
+        return checked([steps, config.total_steps,
+                        steps >= config.num_iterations * config.batch_size])
+    except (OSError, ValueError, KeyError, TypeError):  # no training run here
         return None
 
 
@@ -293,26 +307,44 @@ def _hyperparameters(config: dict) -> dict:
     return {k: v for k, v in config.items() if k not in ("seed", "checkpoint_every")}
 
 
+def paper_notes(rows: list[dict]) -> list[str]:
+    """Rows whose paper numbers come from an environment this project corrects."""
+    return [f"{r['game']} {r['preset']}: the paper's numbers come from another environment: "
+            f"{PAPER_ENVIRONMENT_DIFFERS[r['game'], r['preset']]}" for r in rows
+            if (r["game"], r["preset"]) in PAPER_ENVIRONMENT_DIFFERS]
+
+
+def training_notes(rows: list[dict]) -> list[str]:
+    """PPO evaluations that do not stand beside the paper's 100k-step numbers as they are:
+    checkpoints of unfinished runs, runs of another budget, and checkpoints whose training
+    nothing records."""
+    notes = []
+    for r in rows:
+        row = f"{r['game']} {r['preset']} PPO"
+        runs = list(zip(r["PPO"]["seeds"], r["PPO"]["training"]))
+        unknown = [seed for seed, training in runs if training is None]
+        if unknown:
+            notes.append(f"{row} seed(s) {unknown}: how far the evaluated checkpoints had "
+                         "trained is not recorded")
+        known = [(seed, t) for seed, t in runs if t is not None]
+        unfinished = [f"seed {seed}: {t['trained_agent_steps']} of {t['run_total_steps']}"
+                      for seed, t in known if not t["run_finished"]]
+        if unfinished:
+            notes.append(f"{row}: checkpoints of unfinished runs ({'; '.join(unfinished)} agent "
+                         "steps)")
+        for budget in sorted({t["run_total_steps"] for _, t in known} - {PAPER_AGENT_STEPS}):
+            seeds = [seed for seed, t in known if t["run_total_steps"] == budget]
+            notes.append(f"{row} seed(s) {seeds}: runs of {budget} agent steps (the paper's: "
+                         f"{PAPER_AGENT_STEPS})")
+    return notes
+
+
 def evaluation_notes(rows: list[dict]) -> list[str]:
     """Evaluations in the table that a reader should know about: episodes cut off at the frame
     cap (their returns stop there), and a row that compares evaluations under different caps
     (an older evaluation that did not record its cap is left out of that comparison)."""
     notes = []
     for r in rows:
-        if r["PPO"]["seeds"] and (r["game"], r["preset"]) in PAPER_ENVIRONMENT_DIFFERS:
-            notes.append(f"{r['game']} {r['preset']}: the paper's numbers come from another "
-                         f"environment: {PAPER_ENVIRONMENT_DIFFERS[r['game'], r['preset']]}")
-        for seed, training in zip(r["PPO"]["seeds"], r["PPO"]["training"]):
-            if training is None:
-                continue
-            what = f"{r['game']} {r['preset']} PPO seed {seed}"
-            if not training["run_finished"]:
-                notes.append(f"{what}: its checkpoint is from an unfinished run (trained "
-                             f"{training['trained_agent_steps']} of its "
-                             f"{training['run_total_steps']} agent steps)")
-            if training["run_total_steps"] != PAPER_AGENT_STEPS:
-                notes.append(f"{what}: trained for a budget of {training['run_total_steps']} "
-                             f"agent steps, the paper's for {PAPER_AGENT_STEPS}")
         caps = set()
         for column in ("PPO", "Random"):
             cell = r[column]
@@ -425,7 +457,8 @@ def build_table(results_dir: Path, out_dir: Path | None = None,
     evaluations = load_evaluations(results_dir)
     curves = learning_curves(results_dir)  # read (and checked) before anything is written
     rows = aggregate(evaluations, ppo_policy)
-    notes = table_notes(curves, evaluations, ppo_policy) + evaluation_notes(rows)
+    notes = (table_notes(curves, evaluations, ppo_policy) + paper_notes(rows)
+             + training_notes(rows) + evaluation_notes(rows))
     for note in notes:
         print(f"stori-jax table: note: {note}", file=sys.stderr)
     text = markdown(rows, ppo_policy)

@@ -247,7 +247,8 @@ class Config:
         """True when nothing here draws at random: no action noise or event at p > 0, masks
         only at p 0 or 1 and never the torch (its centre is drawn), no gradual drift. The env
         then plays the same game from every seed under the same actions (its emulators have no
-        randomness of their own without sticky actions)."""
+        randomness of their own without sticky actions), unless ``make(noop_max=N)`` draws
+        random no-ops at each reset."""
         for _, part, _ in self.components():
             if isinstance(part, ObservationMask):
                 if part.prob not in (0.0, 1.0) or (part.kind == "crop" and part.mode == TORCH_MODE):

@@ -928,7 +928,9 @@ def test_the_table_notes_evaluations_cut_off_at_the_frame_cap(tmp_path, capsys):
                           truncated=cut), tmp_path / f"ppo-seed{seed}")
     fake_eval(tmp_path, "Breakout", "3.1", "random", 0, 1.0)  # recorded before caps were
     text, _ = build_table(tmp_path, tmp_path / "out")
-    notes = ["Breakout 3.1 PPO seed 7: 4 of 4 episodes cut off at max_episode_frames 400 "
+    notes = ["Breakout 3.1 PPO seed(s) [0, 7]: how far the evaluated checkpoints had trained "
+             "is not recorded",
+             "Breakout 3.1 PPO seed 7: 4 of 4 episodes cut off at max_episode_frames 400 "
              "(their returns stop there)",
              "Breakout 3.1: the evaluations ran under different frame caps (max_episode_frames "
              "400, 108000)"]
@@ -953,31 +955,43 @@ def test_the_table_notes_other_budgets_unfinished_runs_and_the_papers_other_envi
     """A checkpoint of an unfinished run, or a run of another budget than the paper's 100k,
     stood in the table beside the paper's numbers without a word, and so did the paper's
     numbers of presets whose reference environment had a defect this project corrects. An
-    older evaluation that did not record its training is read from its run's summary.json."""
-    def ppo_eval(seed, **training):
-        write_result(dict(game="Gopher", preset="2.1", agent="ppo", policy="sampled",
+    older evaluation that did not record its training is read from its run's summary.json, or
+    its config.json and log.csv; one that nothing explains is named."""
+    def ppo_eval(preset, seed, **training):
+        write_result(dict(game="Gopher", preset=preset, agent="ppo", policy="sampled",
                           train_seed=seed, mean_return=50.0, episodes=2, **training),
-                     tmp_path / f"ppo-seed{seed}")
+                     tmp_path / preset / f"ppo-seed{seed}")
 
-    ppo_eval(0, trained_agent_steps=100_352, run_total_steps=100_000, run_finished=True)
-    ppo_eval(7, trained_agent_steps=1_024, run_total_steps=12_288, run_finished=False)
-    ppo_eval(13)
-    (tmp_path / "ppo-seed13" / "summary.json").write_text(json.dumps(dict(
+    ppo_eval("2.1", 0, trained_agent_steps=100_352, run_total_steps=100_000, run_finished=True)
+    ppo_eval("2.1", 7, trained_agent_steps=1_024, run_total_steps=12_288, run_finished=False)
+    ppo_eval("2.1", 13)  # a finished run of 1M steps, recorded before evaluations said
+    (tmp_path / "2.1" / "ppo-seed13" / "summary.json").write_text(json.dumps(dict(
         config=dict(total_steps=1_000_000), agent_steps=1_001_472, finished=True)))
-    fake_eval(tmp_path, "Breakout", "3.1", "ppo", 0, 1.0)  # no word of its training: no note
+    ppo_eval("3.1", 0)  # an unfinished run's older evaluation: its config and log say
+    run = tmp_path / "3.1" / "ppo-seed0"
+    (run / "config.json").write_text(json.dumps(dict(game="Gopher", preset="3.1", seed=0,
+                                                     num_envs=2, num_steps=8, total_steps=48)))
+    (run / "log.csv").write_text("iteration,global_step\n1,16\n2,32\n")
+    ppo_eval("3.1", 7, trained_agent_steps="all", run_total_steps=48, run_finished=True)
+    fake_eval(tmp_path, "BankHeist", "2.1", "random", 0, 1.0)  # the paper's numbers: a note
     build_table(tmp_path, tmp_path / "out")
     table = json.loads((tmp_path / "out" / "table.json").read_text())
     assert table["notes"] == [
         "Gopher 2.1: the paper's numbers come from another environment: the reference's "
         "'hole stays open' rule mostly undid the gopher's digging (STORI_SPEC section 7, the "
         "likely cause of DreamerV3's 11333); here it undoes only the farmer's fills",
-        "Gopher 2.1 PPO seed 7: its checkpoint is from an unfinished run (trained 1024 of its "
-        "12288 agent steps)",
-        "Gopher 2.1 PPO seed 7: trained for a budget of 12288 agent steps, the paper's for "
-        "100000",
-        "Gopher 2.1 PPO seed 13: trained for a budget of 1000000 agent steps, the paper's for "
-        "100000"]
-    assert table["rows"][-1]["PPO"]["training"][2] == dict(
+        "BankHeist 2.1: the paper's numbers come from another environment: the reference's "
+        "city switch dropped the player back to an early level; here the level is kept "
+        "(STORI_SPEC section 8)",
+        "Gopher 2.1 PPO: checkpoints of unfinished runs (seed 7: 1024 of 12288 agent steps)",
+        "Gopher 2.1 PPO seed(s) [7]: runs of 12288 agent steps (the paper's: 100000)",
+        "Gopher 2.1 PPO seed(s) [13]: runs of 1000000 agent steps (the paper's: 100000)",
+        "Gopher 3.1 PPO seed(s) [7]: how far the evaluated checkpoints had trained is not "
+        "recorded",  # not a count of steps
+        "Gopher 3.1 PPO: checkpoints of unfinished runs (seed 0: 32 of 48 agent steps)",
+        "Gopher 3.1 PPO seed(s) [0]: runs of 48 agent steps (the paper's: 100000)"]
+    rows = {(r["game"], r["preset"]): r for r in table["rows"]}
+    assert rows["Gopher", "2.1"]["PPO"]["training"][2] == dict(
         trained_agent_steps=1_001_472, run_total_steps=1_000_000, run_finished=True)
 
 
@@ -1119,7 +1133,7 @@ def test_curves_stop_where_a_run_stopped_and_the_table_names_what_it_leaves_out(
         (run / "episodes.csv").write_text("global_step,env,return,length\n64,0,1.0,5\n")
         fake_eval(tmp_path, "Boxing", "3.1", "ppo", seed, 1.0)
     build_table(tmp_path, tmp_path / "out")
-    assert "Boxing 3.1" not in capsys.readouterr().err
+    assert "Boxing 3.1: the runs pooled" not in capsys.readouterr().err
     short = next(run for run in learning_curves(tmp_path)[("Breakout", "2.1")] if run[2] == 0)
     steps, returns, _, end, _ = short
     assert end == 1000  # the log's last step, past the last episode's
@@ -1257,7 +1271,7 @@ def test_cli_train_refuses_to_overwrite_and_evaluates(uninterrupted, tmp_path, c
     err = capsys.readouterr().err
     assert "--preset 3.1 differs from the checkpoint" in err  # not --game
     assert f"stori-jax suite --checkpoint {full / 'checkpoint.pkl'} --games Breakout --presets " \
-        "3.1)" in err
+        "3.1 plays its sampled policy on others" in err
     for flags, error in ((["--preset", "3.2c"], "--preset 3.2C differs from the checkpoint's 1"),
                          (["--preset", "9"], "--preset: unknown preset '9' for Breakout"),
                          (["--game", "Gopher", "--preset", "3.2A"],

@@ -9,6 +9,7 @@ import functools
 import numpy as np
 import pytest
 
+import stori_jax
 from stori_jax import ActionNoise, Config, ObservationMask, RandomEvent, get_game
 
 from _env_support import emulator_states, make, random_actions, run_env
@@ -192,3 +193,20 @@ def test_a_seed_gives_the_same_run_with_jax_x64_enabled():
                          text=True, env={**os.environ, "JAX_ENABLE_X64": "1"}, timeout=300)
     assert x64.returncode == 0, x64.stderr[-2000:]
     assert x64.stdout.split()[-1] == draws_digest()
+
+
+@pytest.mark.parametrize("game, name, deterministic", [
+    ("Gopher", "3.2", True), ("Boxing", "3.2A", True), ("Breakout", "3.2B", False)])
+def test_a_preset_without_a_random_draw_plays_the_same_from_every_seed(game, name,
+                                                                       deterministic):
+    """Config.is_deterministic (eval's note that a greedy policy plays one episode): under the
+    same actions, seeds 0 and 123 give the same observations and rewards, masks included; a
+    preset that draws (a crop at p = 0.75) does not."""
+    assert stori_jax.preset(game, name).is_deterministic() == deterministic
+    runs = []
+    for seed in (0, 123):
+        with make(game, stori_jax.preset(game, name), seed=seed, obs="atari84") as env:
+            runs.append(run_env(env, random_actions(env.num_actions, 25, 2, seed=2)))
+    same = all(np.array_equal(runs[0].stacked(k), runs[1].stacked(k))
+               for k in ("obs", "reward", "obs_masked"))
+    assert same == deterministic

@@ -5,7 +5,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-RAM_SIZE = 128  # bytes of an Atari 2600's RAM
+from stori_jax.backends.layout import RAM_SIZE
 
 
 def extract_labels(game, ram) -> dict:

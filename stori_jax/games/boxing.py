@@ -81,6 +81,7 @@ EVENTS = {
                  pre_frame=_displace_to_corners),
 }
 
+
 def boxing_score(byte):
     """A boxer's score from its byte: BCD 0..99, and 100 for a knockout (0xC0, which BCD would
     read as 120), as ALE's reward counts it."""
