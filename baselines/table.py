@@ -189,15 +189,14 @@ def _training(result: dict, path: Path) -> dict | None:
                         summary["finished"]])
     except (OSError, ValueError, KeyError, TypeError):  # no finished run here, or not ours
         pass
+    steps = _logged_last_step(run)
     try:
         config = PPOConfig.from_recorded(json.loads((run / "config.json").read_text()))
-        with open(run / "log.csv", newline="") as f:
-            rows = list(csv.DictReader(f))
-        steps = int(rows[-1]["global_step"]) if rows else 0
-        return checked([steps, config.total_steps,
-                        steps >= config.num_iterations * config.batch_size])
     except (OSError, ValueError, KeyError, TypeError):  # no training run here
         return None
+    if steps is None:
+        return None
+    return checked([steps, config.total_steps, steps >= config.num_iterations * config.batch_size])
 
 
 def _order(game: str, preset: str):
@@ -268,12 +267,19 @@ def learning_curves(results_dir: Path) -> dict[tuple[str, str], list[tuple]]:
 def _last_step(run_dir: Path, steps: np.ndarray) -> int:
     """How far a run trained: its log's last global_step (its last episode's, without a log)."""
     end = int(steps.max()) if steps.size else 0
+    logged = _logged_last_step(run_dir)
+    return end if logged is None else max(end, logged)
+
+
+def _logged_last_step(run_dir: Path) -> int | None:
+    """The last global_step of a run's log.csv (0 before its first row); None without a log
+    (or one not of ours)."""
     try:
         with open(run_dir / "log.csv", newline="") as f:
             rows = list(csv.DictReader(f))
-        return max(end, int(rows[-1]["global_step"])) if rows else end
-    except (OSError, KeyError, TypeError, ValueError):  # no log, or not one of ours
-        return end
+        return int(rows[-1]["global_step"]) if rows else 0
+    except (OSError, KeyError, TypeError, ValueError):
+        return None
 
 
 def smoothed(steps: np.ndarray, returns: np.ndarray, grid: np.ndarray, window: int,
