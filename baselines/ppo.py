@@ -720,15 +720,20 @@ def load_policy(checkpoint: Path, mode: str = "sampled"):
 TRAINING_KEYS = ("trained_agent_steps", "run_total_steps", "run_finished")
 
 
+def progress_of(config: PPOConfig, agent_steps: int) -> dict:
+    """How far a run of ``config`` that trained ``agent_steps`` had got (TRAINING_KEYS): those
+    steps, the run's budget (total_steps) and whether it had finished its iterations."""
+    return dict(zip(TRAINING_KEYS, (agent_steps, config.total_steps,
+                                    agent_steps >= config.num_iterations * config.batch_size)))
+
+
 def training_progress(ckpt: dict) -> dict:
-    """How far a checkpoint's run had trained (TRAINING_KEYS): the agent steps trained, the
-    run's budget (its config's total_steps) and whether the run had finished; {} for a
-    checkpoint that does not say (no iteration count)."""
+    """:func:`progress_of` a checkpoint's run; {} for a checkpoint that does not say (no
+    iteration count)."""
     if not isinstance(ckpt.get("iteration"), int):
         return {}
     config = PPOConfig.from_recorded(ckpt["config"])
-    return dict(zip(TRAINING_KEYS, (ckpt["iteration"] * config.batch_size, config.total_steps,
-                                    ckpt["iteration"] >= config.num_iterations)))
+    return progress_of(config, ckpt["iteration"] * config.batch_size)
 
 
 def policy_of(ckpt: dict, mode: str = "sampled"):

@@ -170,7 +170,7 @@ def _training(result: dict, path: Path) -> dict | None:
     recorded it, or, for an older one, from the training run it lies in (its summary.json, or
     its config.json and the last global_step of its log.csv); None where nothing says, and for
     the random policy."""
-    from baselines.ppo import TRAINING_KEYS, PPOConfig
+    from baselines.ppo import TRAINING_KEYS, PPOConfig, progress_of
 
     def checked(values) -> dict | None:
         steps, total, finished = values
@@ -196,7 +196,7 @@ def _training(result: dict, path: Path) -> dict | None:
         return None
     if steps is None:
         return None
-    return checked([steps, config.total_steps, steps >= config.num_iterations * config.batch_size])
+    return checked([progress_of(config, steps)[k] for k in TRAINING_KEYS])
 
 
 def _order(game: str, preset: str):

@@ -23,7 +23,7 @@ from typing import Any, Mapping
 
 from .checks import MAX_INT32, check_int, check_probability
 from .games import get_game
-from .games.base import CROP_MODES, TORCH_MODE
+from .games.base import CROP_MODES, is_torch
 
 GRANULARITIES = ("frame", "step")
 DRIFT_SCHEDULES = ("sudden", "cyclic", "gradual")
@@ -251,7 +251,7 @@ class Config:
         random no-ops at each reset."""
         for _, part, _ in self.components():
             if isinstance(part, ObservationMask):
-                if part.prob not in (0.0, 1.0) or (part.kind == "crop" and part.mode == TORCH_MODE):
+                if part.prob not in (0.0, 1.0) or is_torch(part.kind, part.mode):
                     return False
             elif part.prob > 0:
                 return False

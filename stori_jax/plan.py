@@ -37,9 +37,9 @@ class MaskPlan:
 
     @property
     def torch(self) -> bool:
-        from stori_jax.functional.masks import TORCH_MODE
+        from stori_jax.games.base import is_torch
 
-        return self.kind == "crop" and self.mode == TORCH_MODE
+        return is_torch(self.kind, self.mode)
 
 
 @dataclass(frozen=True)

@@ -50,6 +50,11 @@ TORCH_RADIUS = 75
 CROP_MODES = tuple(CROP_REGIONS) + (TORCH_MODE,)  # 0 ("none") is leaving the mask out
 
 
+def is_torch(kind: str, mode: int) -> bool:
+    """Whether an observation mask is the torch (a circle around a centre drawn at random)."""
+    return kind == "crop" and mode == TORCH_MODE
+
+
 @dataclass
 class EventOutcome:
     """What a post-frame rule did: RAM writes, whether it fired, and the reward consequences."""
