@@ -430,7 +430,8 @@ def plot_curves(curves: dict, evaluations: list[dict], out_dir: Path,
                                                 label="mean over seeds")[0]
             if silent:  # its curve is empty, and so is the mean over seeds
                 ax.text(0.02, 0.97, f"seed(s) {silent}: no finished episode,\nso no mean",
-                        transform=ax.transAxes, va="top", fontsize=7)
+                        transform=ax.transAxes, va="top", fontsize=7,  # over any line
+                        bbox=dict(facecolor="white", alpha=0.85, edgecolor="none"), zorder=5)
             if random_means.get((game, preset)):
                 legend["random policy (eval)"] = ax.axhline(
                     np.mean(random_means[(game, preset)]), color="grey", ls="--",

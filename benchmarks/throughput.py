@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import importlib.util
 import json
 import multiprocessing as mp
 import os
@@ -416,6 +417,9 @@ def _check_arguments(parser, args):
     if args.presets is not None:
         args.presets = [spelt_as_the_paper(preset) for preset in args.presets]
     output_directory(parser, args.out)
+    if importlib.util.find_spec("envpool") is None:  # every run has envpool rows
+        parser.error("envpool is not installed, and every run compares against it: "
+                     "pip install -e '.[envpool]'")
 
 
 SWEEP_SIZES = {False: [8, 16, 32, 64], True: [8, 32]}  # B of the 3.1 sweep, by --quick

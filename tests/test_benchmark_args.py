@@ -68,3 +68,17 @@ def test_preset_names_are_spelt_as_the_paper_does(monkeypatch):
     assert args.presets == ["3.2A", "2.1"]
     checks = script(monkeypatch, "_checks")
     assert checks.stori_game_and_preset(parser, "boxing", "3.2c") == ("Boxing", "3.2C")
+
+
+def test_throughput_without_envpool_is_refused_before_measuring(monkeypatch, capsys, tmp_path):
+    """Every throughput run has envpool rows; without the package it recorded an error in each
+    of them after minutes of other measurements."""
+    throughput = script(monkeypatch, "throughput")
+    real_find_spec = throughput.importlib.util.find_spec
+    monkeypatch.setattr(throughput.importlib.util, "find_spec",
+                        lambda name, *a: None if name == "envpool" else real_find_spec(name, *a))
+    with pytest.raises(SystemExit) as exit_info:
+        throughput.main(["--quick", "--out", str(tmp_path)])
+    assert exit_info.value.code == 2
+    assert "envpool is not installed" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
