@@ -55,26 +55,28 @@ def test_the_committed_table_is_what_the_recorded_evaluations_give():
     assert rebuilt == (BASELINE_RESULTS / "table.md").read_text()
 
 
+def _skip_unless_made_with(made_with: dict) -> None:
+    from importlib.metadata import version
+
+    for package in ("jax", "jaxlib", "ale-py"):
+        if version(package) != made_with[package]:
+            pytest.skip(f"recorded with {package} {made_with[package]}, {version(package)} is "
+                        "installed")
+
+
 def test_a_recorded_random_evaluation_replays_from_its_seed():
     """The recorded random-policy evaluations are this code's: the first episode of each of the
     20 envs of Breakout 1 (type-1 action corruption), seed 0, replays exactly, which pins the
     env's random streams, the agent's key and the emulator to the published numbers. Only with
     the jax and ale-py versions that recorded it (other versions may draw or emulate otherwise:
     docs/reproducibility.md)."""
-    from importlib.metadata import version
-
     from baselines.evaluate import evaluate
-    from stori_jax.suite import episode_quotas
-
     from baselines.run_evidence import run_dir
+    from stori_jax.suite import episode_quotas
 
     recorded = json.loads((run_dir("Breakout", "1", "random", 0) / "eval-random.json")
                           .read_text())
-    made_with = recorded["software"]["packages"]
-    for package in ("jax", "jaxlib", "ale-py"):
-        if version(package) != made_with[package]:
-            pytest.skip(f"recorded with {package} {made_with[package]}, {version(package)} is "
-                        "installed")
+    _skip_unless_made_with(recorded["software"]["packages"])
     num_envs = recorded["num_envs"]
     replay = evaluate("Breakout", "1", policy="random", episodes=num_envs, num_envs=num_envs,
                       seed=0, progress=False)
@@ -83,6 +85,45 @@ def test_a_recorded_random_evaluation_replays_from_its_seed():
     assert replay["eval_seed"] == recorded["eval_seed"]
     assert replay["lengths"] == [recorded["lengths"][i] for i in firsts]
     assert replay["returns"] == [recorded["returns"][i] for i in firsts]
+
+
+def test_a_recorded_ppo_run_replays_its_first_iterations_from_its_seed(tmp_path):
+    """The recorded PPO runs are this code's: Breakout 3.1 seed 0, trained again for two
+    iterations from its recorded config, logs the same episodes and the same losses (the second
+    iteration's rollout acts with the first update's policy, so this pins the update too).
+    Only with the jax and ale-py versions that recorded it."""
+    import csv
+
+    from baselines.ppo import TIMING_FIELDS, PPOConfig, train
+    from baselines.run_evidence import run_dir
+
+    recorded_run = run_dir("Breakout", "3.1", "ppo", 0)
+    summary = json.loads((recorded_run / "summary.json").read_text())
+    _skip_unless_made_with(summary["software"]["packages"])
+    config = PPOConfig.from_recorded(json.loads((recorded_run / "config.json").read_text()))
+    iterations = 2
+    train(config, tmp_path, progress=False, stop_after=iterations)
+
+    def rows(path, keep):
+        with open(path, newline="") as f:
+            return [row for row in csv.DictReader(f) if keep(row)]
+
+    def learning(row):
+        return {k: v for k, v in row.items() if k not in TIMING_FIELDS}
+
+    logged = rows(recorded_run / "log.csv", lambda r: int(r["iteration"]) <= iterations)
+    replayed = rows(tmp_path / "log.csv", lambda r: True)
+    assert [r.keys() for r in replayed] == [r.keys() for r in logged]
+    for got, want in zip(replayed, logged, strict=True):
+        for field, value in learning(want).items():  # losses to float32's last digits
+            if value and got[field]:
+                np.testing.assert_allclose(float(got[field]), float(value), rtol=1e-5,
+                                           atol=1e-7, err_msg=field)
+            else:
+                assert got[field] == value, field
+    last_step = int(logged[-1]["global_step"])
+    assert rows(tmp_path / "episodes.csv", lambda r: True) == rows(
+        recorded_run / "episodes.csv", lambda r: int(r["global_step"]) <= last_step)
 
 
 def test_the_readme_shows_the_committed_table():
