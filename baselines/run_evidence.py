@@ -24,7 +24,7 @@ SEEDS = (0, 7, 13)
 # Breakout: 2 epochs of 8 minibatches (as many gradient steps per iteration as the defaults).
 # Boxing: that light update leaves the policy uniform after 100k steps (entropy ln 18), and so
 # did 4x the learning rate, 4 epochs, or gamma 0.9 (results/boxing-probes/README.md).  10 epochs
-# of 16 minibatches (10x the gradient steps, on minibatches of 64; 6.5-11 min a run) did best on
+# of 16 minibatches (10x the gradient steps, on minibatches of 64; 6.3-11 min a run) did best on
 # seed 0, the most this CPU affords for 9 runs.  On all three seeds, random shifts
 # (augment_shift=4), gamma 0.95, the Nature-CNN defaults and the Nature CNN under this update
 # did no better, nor on seed 13 did action_head="factored" (same README).

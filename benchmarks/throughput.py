@@ -261,10 +261,13 @@ def plan_measurements(args):
     return jobs
 
 
-def run(args):
+def needs_envpool(jobs) -> bool:
+    return any(job["backend"] == "envpool" for job in jobs)
+
+
+def run(args, jobs):
     from tqdm import tqdm
 
-    jobs = plan_measurements(args)
     results = []
     for job in tqdm(jobs, desc="throughput", unit="run"):
         fn = job.pop("fn")
@@ -417,9 +420,6 @@ def _check_arguments(parser, args):
     if args.presets is not None:
         args.presets = [spelt_as_the_paper(preset) for preset in args.presets]
     output_directory(parser, args.out)
-    if importlib.util.find_spec("envpool") is None:  # every run has envpool rows
-        parser.error("envpool is not installed, and every run compares against it: "
-                     "pip install -e '.[envpool]'")
 
 
 SWEEP_SIZES = {False: [8, 16, 32, 64], True: [8, 32]}  # B of the 3.1 sweep, by --quick
@@ -468,13 +468,17 @@ def main(argv=None):
     _check_arguments(parser, args)
     if args.sizes is None:
         args.sizes = SWEEP_SIZES[args.quick]
+    jobs = plan_measurements(args)
+    if needs_envpool(jobs) and importlib.util.find_spec("envpool") is None:
+        parser.error("envpool is not installed, and this run compares against it (raw envpool "
+                     "and stori-jax's envpool backend): pip install -e '.[envpool]'")
     from stori_jax.provenance import software
 
     meta = dict(date=datetime.date.today().isoformat(), host=socket.gethostname(),
                 cores=cores(), workers=args.workers,
                 seconds=args.seconds, argv=sys.argv[1:] if argv is None else list(argv),
                 software=software())
-    results = add_ratios(run(args))
+    results = add_ratios(run(args, jobs))
     args.out.mkdir(parents=True, exist_ok=True)
     stem = args.out / f"{meta['date']}-{meta['host']}{name_suffix(parser, args)}"
     Path(f"{stem}.json").write_text(json.dumps(dict(meta=meta, results=results), indent=1))

@@ -71,14 +71,21 @@ def test_preset_names_are_spelt_as_the_paper_does(monkeypatch):
 
 
 def test_throughput_without_envpool_is_refused_before_measuring(monkeypatch, capsys, tmp_path):
-    """Every throughput run has envpool rows; without the package it recorded an error in each
-    of them after minutes of other measurements."""
+    """A throughput run with envpool rows, without the package, recorded an error in each of
+    them after minutes of other measurements; a run without envpool rows needs no envpool."""
     throughput = script(monkeypatch, "throughput")
     real_find_spec = throughput.importlib.util.find_spec
     monkeypatch.setattr(throughput.importlib.util, "find_spec",
-                        lambda name, *a: None if name == "envpool" else real_find_spec(name, *a))
+                        lambda name, *a, **k: None if name == "envpool"
+                        else real_find_spec(name, *a, **k))
     with pytest.raises(SystemExit) as exit_info:
         throughput.main(["--quick", "--out", str(tmp_path)])
     assert exit_info.value.code == 2
     assert "envpool is not installed" in capsys.readouterr().err
     assert not any(tmp_path.iterdir())
+    measured = []  # Gopher 2.1 (events) has no envpool rows: it runs
+    monkeypatch.setattr(throughput, "run", lambda args, jobs: measured.append(jobs) or [])
+    monkeypatch.setattr(throughput, "plots", lambda *a: [])
+    throughput.main(["--games", "Gopher", "--presets", "2.1", "--skip-naive", "--out",
+                     str(tmp_path)])
+    assert measured and not throughput.needs_envpool(measured[0])

@@ -332,7 +332,7 @@ def test_the_table_columns_hold_what_their_headers_say(monkeypatch):
 
 def test_a_run_writes_json_a_table_and_the_plots_it_names(monkeypatch, tmp_path, capsys):
     throughput = script(monkeypatch, "throughput")
-    monkeypatch.setattr(throughput, "run", lambda args: fake_results())
+    monkeypatch.setattr(throughput, "run", lambda args, jobs: fake_results())
     throughput.main(["--games", "breakout", "--presets", "3.1", "2.2", "--sizes", "8", "32",
                      "--out", str(tmp_path)])
     written = sorted(p.name for p in tmp_path.iterdir())
@@ -366,7 +366,7 @@ def test_a_run_with_other_options_is_named_apart_from_a_full_run(monkeypatch, tm
     """Only a run with the default options writes <date>-<host>.*: a quick run, a subset or
     other settings never overwrite it (nor each other), and the JSON records the argv given."""
     throughput = script(monkeypatch, "throughput")
-    monkeypatch.setattr(throughput, "run", lambda args: fake_results())
+    monkeypatch.setattr(throughput, "run", lambda args, jobs: fake_results())
     monkeypatch.setattr(throughput, "plots", lambda results, stem, batch: [])
     monkeypatch.setattr(throughput, "cores", lambda: 2)  # the --workers default
     throughput.main(argv + ["--out", str(tmp_path)])

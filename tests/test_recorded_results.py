@@ -55,10 +55,10 @@ def test_the_committed_table_is_what_the_recorded_evaluations_give():
     assert rebuilt == (BASELINE_RESULTS / "table.md").read_text()
 
 
-def _skip_unless_made_with(made_with: dict) -> None:
+def _skip_unless_made_with(made_with: dict, packages=("jax", "jaxlib", "ale-py")) -> None:
     from importlib.metadata import version
 
-    for package in ("jax", "jaxlib", "ale-py"):
+    for package in packages:
         if version(package) != made_with[package]:
             pytest.skip(f"recorded with {package} {made_with[package]}, {version(package)} is "
                         "installed")
@@ -88,10 +88,10 @@ def test_a_recorded_random_evaluation_replays_from_its_seed():
 
 
 def test_a_recorded_ppo_run_replays_its_first_iterations_from_its_seed(tmp_path):
-    """The recorded PPO runs are this code's: Breakout 3.1 seed 0, trained again for two
-    iterations from its recorded config, logs the same episodes and the same losses (the second
-    iteration's rollout acts with the first update's policy, so this pins the update too).
-    Only with the jax and ale-py versions that recorded it."""
+    """The recorded PPO runs are this code's: Breakout 3.1 seed 0, trained again for four
+    iterations from its recorded config, logs the same episodes (16, most of them scoring) and
+    the same losses (each later rollout acts with the updated policy, so this pins the update
+    too). Only with the jax, flax, optax and ale-py versions that recorded it."""
     import csv
 
     from baselines.ppo import TIMING_FIELDS, PPOConfig, train
@@ -99,9 +99,10 @@ def test_a_recorded_ppo_run_replays_its_first_iterations_from_its_seed(tmp_path)
 
     recorded_run = run_dir("Breakout", "3.1", "ppo", 0)
     summary = json.loads((recorded_run / "summary.json").read_text())
-    _skip_unless_made_with(summary["software"]["packages"])
+    _skip_unless_made_with(summary["software"]["packages"],
+                           ("jax", "jaxlib", "ale-py", "flax", "optax"))
     config = PPOConfig.from_recorded(json.loads((recorded_run / "config.json").read_text()))
-    iterations = 2
+    iterations = 4
     train(config, tmp_path, progress=False, stop_after=iterations)
 
     def rows(path, keep):
@@ -115,15 +116,17 @@ def test_a_recorded_ppo_run_replays_its_first_iterations_from_its_seed(tmp_path)
     replayed = rows(tmp_path / "log.csv", lambda r: True)
     assert [r.keys() for r in replayed] == [r.keys() for r in logged]
     for got, want in zip(replayed, logged, strict=True):
-        for field, value in learning(want).items():  # losses to float32's last digits
+        for field, value in learning(want).items():  # another CPU's float rounding passes
             if value and got[field]:
                 np.testing.assert_allclose(float(got[field]), float(value), rtol=1e-5,
                                            atol=1e-7, err_msg=field)
             else:
                 assert got[field] == value, field
     last_step = int(logged[-1]["global_step"])
-    assert rows(tmp_path / "episodes.csv", lambda r: True) == rows(
-        recorded_run / "episodes.csv", lambda r: int(r["global_step"]) <= last_step)
+    recorded_episodes = rows(recorded_run / "episodes.csv",
+                             lambda r: int(r["global_step"]) <= last_step)
+    assert sum(float(r["return"]) > 0 for r in recorded_episodes) >= 10  # a test of the returns
+    assert rows(tmp_path / "episodes.csv", lambda r: True) == recorded_episodes
 
 
 def test_the_readme_shows_the_committed_table():
