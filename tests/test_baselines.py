@@ -7,6 +7,7 @@ import csv
 import dataclasses
 import json
 import pickle
+import re
 import shutil
 import warnings
 
@@ -516,6 +517,50 @@ def test_resuming_a_run_stopped_before_its_summary_writes_it(uninterrupted, tmp_
     assert ppo.train(tiny(), run, progress=False, resume=True)["iterations_now"] == 0
     assert json.loads((run / "summary.json").read_text()) == json.loads(
         (full / "summary.json").read_text())
+
+
+def test_a_run_trained_in_stages_is_the_uninterrupted_run_with_each_stage_evaluated(
+        uninterrupted, tmp_path, monkeypatch):
+    """run_long.py's stages: the run ends as the uninterrupted one; each stage's checkpoint is
+    the one a run stopped there holds, evaluated with its own progress; a second call trains
+    and evaluates nothing; a run trained past a stage without it is refused."""
+    from baselines import run_long
+
+    full, _ = uninterrupted
+    run, by_step = tmp_path / "run", tmp_path / "by-step"
+    run_long.train_in_stages(tiny(), run, by_step, stages=(1, 2), episodes=2, num_envs=2,
+                             progress=False)
+    assert read_log(run) == read_log(full)
+    assert (run / "episodes.csv").read_text() == (full / "episodes.csv").read_text()
+    stopped = tmp_path / "stopped"
+    ppo.train(tiny(), stopped, progress=False, stop_after=1)
+    a, b = read_checkpoint(by_step / "64" / "seed0"), read_checkpoint(stopped)
+    assert a["iteration"] == 1
+    assert_trees_equal((a["params"], a["opt_state"], a["key"]),
+                       (b["params"], b["opt_state"], b["key"]))
+    for where, steps, finished in ((by_step / "64" / "seed0", 64, False),
+                                   (by_step / "128" / "seed0", 128, False), (run, 192, True)):
+        result = json.loads((where / "eval-sampled.json").read_text())
+        assert (result["trained_agent_steps"], result["run_finished"]) == (steps, finished)
+        assert result["episodes"] == 2 and result["eval_seed"] == 10_000
+        assert result["checkpoint"] == str((where / "checkpoint.pkl").resolve())  # not ours
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("nothing is left to train or evaluate")
+
+    monkeypatch.setattr(ppo, "train", refuse)
+    monkeypatch.setattr("baselines.evaluate.evaluate", refuse)
+    run_long.train_in_stages(tiny(), run, by_step, stages=(1, 2), episodes=2, num_envs=2,
+                             progress=False)
+    monkeypatch.undo()
+    with pytest.raises(ValueError, match=r"has trained 3 iterations, past the stage at "
+                                         r"iteration 1 .*start the run again"):
+        run_long.train_in_stages(tiny(), run, tmp_path / "elsewhere", stages=(1,), episodes=2,
+                                 num_envs=2, progress=False)
+    for stages in ((0,), (3,), (2, 1), (1, 1)):
+        with pytest.raises(ValueError, match=r"stages must be increasing iterations between 1 "
+                                             rf"and 2 .*got {re.escape(str(list(stages)))}"):
+            run_long.train_in_stages(tiny(), tmp_path / "bad", by_step, stages=stages)
 
 
 def test_same_seed_same_updates_other_seed_others(uninterrupted, tmp_path):
