@@ -294,7 +294,7 @@ def smoothed(steps: np.ndarray, returns: np.ndarray, grid: np.ndarray, window: i
     return out
 
 
-def _steps_label(value: float, _position) -> str:
+def steps_label(value: float, _position) -> str:
     """An axis label of agent steps: 50k, 1.5M (full numbers overlap on a narrow panel)."""
     if abs(value) >= 1e6:
         return f"{value / 1e6:g}M"
@@ -439,7 +439,7 @@ def plot_curves(curves: dict, evaluations: list[dict], out_dir: Path,
             ax.set_title(f"{game} {preset}")
             ax.set_xlabel("agent steps")
             ax.set_xlim(0, grid[-1])  # also where no curve has a point
-            ax.xaxis.set_major_formatter(FuncFormatter(_steps_label))
+            ax.xaxis.set_major_formatter(FuncFormatter(steps_label))
             ax.grid(alpha=0.3)
         axes[0][0].set_ylabel(f"episode return (mean of last {window})")
         order = [f"seed {seed}" for seed in seeds] + ["mean over seeds", "random policy (eval)"]

@@ -563,6 +563,43 @@ def test_a_run_trained_in_stages_is_the_uninterrupted_run_with_each_stage_evalua
             run_long.train_in_stages(tiny(), tmp_path / "bad", by_step, stages=stages)
 
 
+def test_the_onset_table_lists_each_stages_evaluations_by_seed(tmp_path, monkeypatch):
+    """run_long.py's onset.md: a row per agent steps (from each evaluation's own record, not
+    its folder), each seed's mean ± episode std, the mean ± std of the seed means, the random
+    policy's row; evaluations that cannot be placed are refused by path."""
+    from baselines import run_long
+
+    def evaluation(where, seed, steps, returns):
+        write_result(dict(policy="sampled", train_seed=seed, trained_agent_steps=steps,
+                          mean_return=float(np.mean(returns)),
+                          std_return=float(np.std(returns))), tmp_path / where)
+
+    evaluation("runs/seed0", 0, 3000, [4.0, 6.0])
+    evaluation("runs/seed7", 7, 3000, [1.0, 3.0])
+    evaluation("by-step/1000/seed0", 0, 1000, [0.0, 1.0])
+    evaluation("by-step/1000/seed7", 7, 1000, [-1.0, 1.0])
+    evaluation("by-step/2000/seed0", 0, 2000, [2.0, 2.0])  # seed 7's not evaluated yet
+    random = {0: dict(mean_return=0.5, std_return=1.0), 7: dict(mean_return=1.5, std_return=2.0)}
+    monkeypatch.setattr(run_long, "random_evaluations", lambda seeds: random)
+    text = run_long.write_onset(tmp_path)
+    assert text == (tmp_path / "onset.md").read_text()
+    assert text.splitlines() == [
+        "| agent steps | seed 0 | seed 7 | mean ± std over seeds |", "|---|---|---|---|",
+        "| 1,000 | 0.50 ± 0.50 | 0.00 ± 1.00 | 0.25 ± 0.35 |",
+        "| 2,000 | 2.00 ± 0.00 | - | - |",
+        "| 3,000 | 5.00 ± 1.00 | 2.00 ± 1.00 | 3.50 ± 2.12 |",
+        "| random policy | 0.50 ± 1.00 | 1.50 ± 2.00 | 1.00 ± 0.71 |"]
+    assert (tmp_path / "onset.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    evaluation("elsewhere/seed0", 0, 2000, [9.0])
+    with pytest.raises(ValueError, match=r"a second evaluation of seed 0 at 2000 agent steps"):
+        run_long.evaluations_by_step(tmp_path)
+    shutil.rmtree(tmp_path / "elsewhere")
+    write_result(dict(policy="sampled", train_seed=0, mean_return=1.0), tmp_path / "old")
+    with pytest.raises(ValueError, match=r"old/eval-sampled.json does not record how far its "
+                                         r"checkpoint had trained \(trained_agent_steps\)"):
+        run_long.evaluations_by_step(tmp_path)
+
+
 def test_same_seed_same_updates_other_seed_others(uninterrupted, tmp_path):
     full, _ = uninterrupted
     ppo.train(tiny(), tmp_path / "same", progress=False, stop_after=1)

@@ -87,23 +87,21 @@ def test_a_recorded_random_evaluation_replays_from_its_seed():
     assert replay["returns"] == [recorded["returns"][i] for i in firsts]
 
 
-def test_a_recorded_ppo_run_replays_its_first_iterations_from_its_seed(tmp_path):
-    """The recorded PPO runs are this code's: Breakout 3.1 seed 0, trained again for four
-    iterations from its recorded config, logs the same episodes (16, most of them scoring) and
-    the same losses (each later rollout acts with the updated policy, so this pins the update
-    too). Only with the jax, flax, optax and ale-py versions that recorded it."""
+def _replay_first_iterations(recorded_run: Path, iterations: int, out: Path) -> list[dict]:
+    """Train the recorded run's config again for ``iterations`` into ``out`` and check its log
+    against the recorded one: the same episodes, the same losses (each later rollout acts with
+    the updated policy, so this pins the update too; to a relative 1e-5, which another CPU's
+    float rounding passes).  Only with the jax, flax, optax and ale-py versions that recorded
+    it.  Returns the recorded episodes it replayed."""
     import csv
 
     from baselines.ppo import TIMING_FIELDS, PPOConfig, train
-    from baselines.run_evidence import run_dir
 
-    recorded_run = run_dir("Breakout", "3.1", "ppo", 0)
     summary = json.loads((recorded_run / "summary.json").read_text())
     _skip_unless_made_with(summary["software"]["packages"],
                            ("jax", "jaxlib", "ale-py", "flax", "optax"))
     config = PPOConfig.from_recorded(json.loads((recorded_run / "config.json").read_text()))
-    iterations = 4
-    train(config, tmp_path, progress=False, stop_after=iterations)
+    train(config, out, progress=False, stop_after=iterations)
 
     def rows(path, keep):
         with open(path, newline="") as f:
@@ -113,10 +111,11 @@ def test_a_recorded_ppo_run_replays_its_first_iterations_from_its_seed(tmp_path)
         return {k: v for k, v in row.items() if k not in TIMING_FIELDS}
 
     logged = rows(recorded_run / "log.csv", lambda r: int(r["iteration"]) <= iterations)
-    replayed = rows(tmp_path / "log.csv", lambda r: True)
+    replayed = rows(out / "log.csv", lambda r: True)
+    assert len(logged) == iterations
     assert [r.keys() for r in replayed] == [r.keys() for r in logged]
     for got, want in zip(replayed, logged, strict=True):
-        for field, value in learning(want).items():  # another CPU's float rounding passes
+        for field, value in learning(want).items():
             if value and got[field]:
                 np.testing.assert_allclose(float(got[field]), float(value), rtol=1e-5,
                                            atol=1e-7, err_msg=field)
@@ -125,8 +124,27 @@ def test_a_recorded_ppo_run_replays_its_first_iterations_from_its_seed(tmp_path)
     last_step = int(logged[-1]["global_step"])
     recorded_episodes = rows(recorded_run / "episodes.csv",
                              lambda r: int(r["global_step"]) <= last_step)
-    assert sum(float(r["return"]) > 0 for r in recorded_episodes) >= 10  # a test of the returns
-    assert rows(tmp_path / "episodes.csv", lambda r: True) == recorded_episodes
+    assert rows(out / "episodes.csv", lambda r: True) == recorded_episodes
+    return recorded_episodes
+
+
+def test_a_recorded_ppo_run_replays_its_first_iterations_from_its_seed(tmp_path):
+    """The recorded PPO runs are this code's: Breakout 3.1 seed 0, trained again for four
+    iterations from its recorded config, logs the same 16 episodes and the same losses."""
+    from baselines.run_evidence import run_dir
+
+    episodes = _replay_first_iterations(run_dir("Breakout", "3.1", "ppo", 0), 4, tmp_path)
+    assert len(episodes) == 16
+    assert sum(float(r["return"]) > 0 for r in episodes) >= 10  # a test of the returns
+
+
+def test_a_recorded_million_step_run_replays_its_first_iterations_from_its_seed(tmp_path):
+    """The 1M-step Boxing runs (run_long.py) are this code's too: seed 0's first two iterations
+    of CleanRL's defaults (the Nature CNN, 4 epochs of 4 minibatches) log the same losses (no
+    Boxing episode ends in 256 steps per env)."""
+    from baselines.run_long import OUT
+
+    assert _replay_first_iterations(OUT / "runs" / "seed0", 2, tmp_path) == []
 
 
 def test_the_readme_shows_the_committed_table():
