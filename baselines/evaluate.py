@@ -154,5 +154,7 @@ def write_result(result: dict, out_dir: Path) -> Path:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     path = result_path(out_dir, result["policy"])
-    path.write_text(json.dumps(result, indent=1))
+    partial = path.with_suffix(".tmp")  # an interruption leaves no truncated result behind
+    partial.write_text(json.dumps(result, indent=1))
+    partial.replace(path)
     return path

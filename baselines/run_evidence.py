@@ -35,6 +35,13 @@ GAME_HYPERPARAMETERS = {"Breakout": EVIDENCE_HYPERPARAMETERS,
                                        num_minibatches=16)}
 
 
+def results_name(path: Path) -> str:
+    """``path`` as the recorded results name a checkpoint: from RESULTS where it lies inside
+    (the name then holds in any checkout), else in full."""
+    path = Path(path).resolve()
+    return str(path.relative_to(RESULTS)) if path.is_relative_to(RESULTS) else str(path)
+
+
 def run_dir(game: str, preset: str, agent: str, seed: int) -> Path:
     from baselines.commands import run_dir as layout
 
@@ -79,7 +86,7 @@ def stage_eval(runs=RUNS, seeds=SEEDS) -> None:
                 result = evaluate(game, preset, policy=policy, episodes=EVAL_EPISODES,
                                   seed=seed, num_envs=EVAL_NUM_ENVS, checkpoint=checkpoint)
                 if checkpoint is not None:  # file the checkpoint as the repository names it
-                    result["checkpoint"] = str(checkpoint.relative_to(RESULTS))
+                    result["checkpoint"] = results_name(checkpoint)
                 write_result(result, out)
                 print(f"{game} {preset} seed {seed} {policy}: {result['mean_return']:.2f}",
                       flush=True)

@@ -519,17 +519,39 @@ def test_resuming_a_run_stopped_before_its_summary_writes_it(uninterrupted, tmp_
         (full / "summary.json").read_text())
 
 
-def test_a_run_trained_in_stages_is_the_uninterrupted_run_with_each_stage_evaluated(
-        uninterrupted, tmp_path, monkeypatch):
-    """run_long.py's stages: the run ends as the uninterrupted one; each stage's checkpoint is
-    the one a run stopped there holds, evaluated with its own progress; a second call trains
-    and evaluates nothing; a run trained past a stage without it is refused."""
+@pytest.fixture
+def staged(uninterrupted, tmp_path):
+    """run_long.py's stages (1 and 2) of the tiny run, trained into tmp_path/run."""
     from baselines import run_long
 
-    full, _ = uninterrupted
     run, by_step = tmp_path / "run", tmp_path / "by-step"
     run_long.train_in_stages(tiny(), run, by_step, stages=(1, 2), episodes=2, num_envs=2,
                              progress=False)
+    return run, by_step
+
+
+def count_calls(monkeypatch):
+    """Count (and let through) ppo.train's and evaluate's calls from run_long."""
+    import baselines.evaluate
+
+    calls = dict(train=0, evaluate=0)
+    for module, name in ((ppo, "train"), (baselines.evaluate, "evaluate")):
+        def counted(*args, _real=getattr(module, name), _name=name, **kwargs):
+            calls[_name] += 1
+            return _real(*args, **kwargs)
+        monkeypatch.setattr(module, name, counted)
+    return calls
+
+
+def test_a_run_trained_in_stages_is_the_uninterrupted_run_with_each_stage_evaluated(
+        uninterrupted, staged, tmp_path, monkeypatch):
+    """The run ends as the uninterrupted one; each stage's checkpoint is the one a run stopped
+    there holds, evaluated with its own progress; a second call trains and evaluates
+    nothing."""
+    from baselines import run_long
+
+    full, _ = uninterrupted
+    run, by_step = staged
     assert read_log(run) == read_log(full)
     assert (run / "episodes.csv").read_text() == (full / "episodes.csv").read_text()
     stopped = tmp_path / "stopped"
@@ -544,59 +566,132 @@ def test_a_run_trained_in_stages_is_the_uninterrupted_run_with_each_stage_evalua
         assert (result["trained_agent_steps"], result["run_finished"]) == (steps, finished)
         assert result["episodes"] == 2 and result["eval_seed"] == 10_000
         assert result["checkpoint"] == str((where / "checkpoint.pkl").resolve())  # not ours
-
-    def refuse(*args, **kwargs):
-        raise AssertionError("nothing is left to train or evaluate")
-
-    monkeypatch.setattr(ppo, "train", refuse)
-    monkeypatch.setattr("baselines.evaluate.evaluate", refuse)
+    assert not list(tmp_path.rglob("*.tmp"))
+    calls = count_calls(monkeypatch)
     run_long.train_in_stages(tiny(), run, by_step, stages=(1, 2), episodes=2, num_envs=2,
                              progress=False)
-    monkeypatch.undo()
-    with pytest.raises(ValueError, match=r"has trained 3 iterations, past the stage at "
-                                         r"iteration 1 .*start the run again"):
+    assert calls == dict(train=0, evaluate=0)
+
+
+def test_stages_resume_where_an_interruption_left_them(uninterrupted, staged, tmp_path,
+                                                       monkeypatch):
+    """Stopped at any point, the script does only what is left: a stage trained but not
+    copied aside, a copy not evaluated, a run trained but without its summary."""
+    from baselines import run_long
+
+    full, _ = uninterrupted
+    run, by_step = staged
+    again, again_by_step = tmp_path / "again", tmp_path / "again-by-step"
+    ppo.train(tiny(), again, progress=False, stop_after=1)  # stopped before the copy
+    calls = count_calls(monkeypatch)
+    run_long.train_in_stages(tiny(), again, again_by_step, stages=(1, 2), episodes=2,
+                             num_envs=2, progress=False)
+    assert calls == dict(train=3, evaluate=3)  # stage 1 has nothing left to train
+    assert read_log(again) == read_log(full)
+    for where in ("64/seed0", "128/seed0"):
+        assert (json.loads((again_by_step / where / "eval-sampled.json").read_text())["returns"]
+                == json.loads((by_step / where / "eval-sampled.json").read_text())["returns"])
+    (by_step / "128" / "seed0" / "eval-sampled.json").unlink()  # copied, not evaluated
+    (run / "summary.json").unlink()  # trained, summary not written
+    calls = count_calls(monkeypatch)
+    run_long.train_in_stages(tiny(), run, by_step, stages=(1, 2), episodes=2, num_envs=2,
+                             progress=False)
+    assert calls == dict(train=1, evaluate=1)
+    assert json.loads((run / "summary.json").read_text())["finished"]
+
+
+def test_stages_refuse_what_they_cannot_resume(staged, tmp_path):
+    """A run trained past a stage whose checkpoint is missing, a run without its checkpoint
+    (a fresh clone's: checkpoints are not committed) and bad stages are refused by name;
+    the run's files are left as they were."""
+    from baselines import run_long
+
+    run, by_step = staged
+    log = (run / "log.csv").read_text()
+    with pytest.raises(ValueError, match=r"has trained 3 iterations, past stage 1, and .*"
+                                         r"elsewhere/64/seed0/checkpoint.pkl is missing"):
         run_long.train_in_stages(tiny(), run, tmp_path / "elsewhere", stages=(1,), episodes=2,
                                  num_envs=2, progress=False)
+    (run / "checkpoint.pkl").unlink()
+    with pytest.raises(ValueError, match=r"run holds a run \(summary.json, log.csv\) but no "
+                                         r"checkpoint.pkl to resume it from"):
+        run_long.train_in_stages(tiny(), run, tmp_path / "elsewhere", stages=(1,), episodes=2,
+                                 num_envs=2, progress=False)
+    assert (run / "log.csv").read_text() == log
     for stages in ((0,), (3,), (2, 1), (1, 1)):
         with pytest.raises(ValueError, match=r"stages must be increasing iterations between 1 "
                                              rf"and 2 .*got {re.escape(str(list(stages)))}"):
             run_long.train_in_stages(tiny(), tmp_path / "bad", by_step, stages=stages)
 
 
+def long_evaluation(root, where, seed, steps, returns, **fields):
+    write_result(dict(dict(game="Boxing", preset="3.1", policy="sampled", train_seed=seed,
+                           trained_agent_steps=steps, run_total_steps=1_000_000,
+                           episodes=len(returns), mean_return=float(np.mean(returns)),
+                           std_return=float(np.std(returns))), **fields), root / where)
+
+
 def test_the_onset_table_lists_each_stages_evaluations_by_seed(tmp_path, monkeypatch):
     """run_long.py's onset.md: a row per agent steps (from each evaluation's own record, not
-    its folder), each seed's mean ± episode std, the mean ± std of the seed means, the random
-    policy's row; evaluations that cannot be placed are refused by path."""
+    its folder), each seed's mean ± episode std, the mean ± std of the seed means (saying how
+    many seeds where some are missing), the random policy's row."""
     from baselines import run_long
 
-    def evaluation(where, seed, steps, returns):
-        write_result(dict(policy="sampled", train_seed=seed, trained_agent_steps=steps,
-                          mean_return=float(np.mean(returns)),
-                          std_return=float(np.std(returns))), tmp_path / where)
-
-    evaluation("runs/seed0", 0, 3000, [4.0, 6.0])
-    evaluation("runs/seed7", 7, 3000, [1.0, 3.0])
-    evaluation("by-step/1000/seed0", 0, 1000, [0.0, 1.0])
-    evaluation("by-step/1000/seed7", 7, 1000, [-1.0, 1.0])
-    evaluation("by-step/2000/seed0", 0, 2000, [2.0, 2.0])  # seed 7's not evaluated yet
-    random = {0: dict(mean_return=0.5, std_return=1.0), 7: dict(mean_return=1.5, std_return=2.0)}
+    long_evaluation(tmp_path, "runs/seed0", 0, 3000, [4.0, 6.0])
+    long_evaluation(tmp_path, "runs/seed7", 7, 3000, [1.0, 3.0])
+    long_evaluation(tmp_path, "by-step/1000/seed0", 0, 1000, [0.0, 1.0])
+    long_evaluation(tmp_path, "by-step/1000/seed7", 7, 1000, [-1.0, 1.0])
+    long_evaluation(tmp_path, "by-step/1000/seed13", 13, 1000, [3.0, 5.0])
+    long_evaluation(tmp_path, "by-step/2000/seed0", 0, 2000, [2.0, 2.0])
+    random = {0: dict(mean_return=0.5, std_return=1.0), 7: dict(mean_return=1.5, std_return=2.0),
+              13: dict(mean_return=1.0, std_return=3.0)}
     monkeypatch.setattr(run_long, "random_evaluations", lambda seeds: random)
     text = run_long.write_onset(tmp_path)
     assert text == (tmp_path / "onset.md").read_text()
-    assert text.splitlines() == [
-        "| agent steps | seed 0 | seed 7 | mean ± std over seeds |", "|---|---|---|---|",
-        "| 1,000 | 0.50 ± 0.50 | 0.00 ± 1.00 | 0.25 ± 0.35 |",
-        "| 2,000 | 2.00 ± 0.00 | - | - |",
-        "| 3,000 | 5.00 ± 1.00 | 2.00 ± 1.00 | 3.50 ± 2.12 |",
-        "| random policy | 0.50 ± 1.00 | 1.50 ± 2.00 | 1.00 ± 0.71 |"]
+    assert text.splitlines()[:7] == [
+        "| agent steps | seed 0 | seed 7 | seed 13 | mean ± std over seeds |",
+        "|---|---|---|---|---|",
+        "| 1,000 | 0.50 ± 0.50 | 0.00 ± 1.00 | 4.00 ± 1.00 | 1.50 ± 2.18 |",
+        "| 2,000 | 2.00 ± 0.00 | - | - | - |",
+        "| 3,000 | 5.00 ± 1.00 | 2.00 ± 1.00 | - | 3.50 ± 2.12 (2 of 3 seeds) |",
+        "| random policy | 0.50 ± 1.00 | 1.50 ± 2.00 | 1.00 ± 3.00 | 1.00 ± 0.50 |", ""]
+    assert "its 2 evaluation episodes ± their std" in text
     assert (tmp_path / "onset.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    evaluation("elsewhere/seed0", 0, 2000, [9.0])
-    with pytest.raises(ValueError, match=r"a second evaluation of seed 0 at 2000 agent steps"):
-        run_long.evaluations_by_step(tmp_path)
-    shutil.rmtree(tmp_path / "elsewhere")
-    write_result(dict(policy="sampled", train_seed=0, mean_return=1.0), tmp_path / "old")
-    with pytest.raises(ValueError, match=r"old/eval-sampled.json does not record how far its "
-                                         r"checkpoint had trained \(trained_agent_steps\)"):
+
+
+def test_the_random_policys_boxing_evaluations_are_the_recorded_ones():
+    from baselines import run_long
+    from baselines.run_evidence import run_dir
+
+    found = run_long.random_evaluations(run_long.SEEDS)
+    assert sorted(found) == list(run_long.SEEDS)
+    for seed, result in found.items():
+        assert (result["game"], result["preset"], result["train_seed"]) == ("Boxing", "3.1", seed)
+        assert result == json.loads((run_dir("Boxing", "3.1", "random", seed)
+                                     / "eval-random.json").read_text())
+
+
+@pytest.mark.parametrize("where, fields, match", [
+    ("elsewhere/seed0", dict(), r"a second evaluation of seed 0 at 2000 agent steps \(the "
+                                r"other: .*by-step/2000/seed0/eval-sampled.json\)"),
+    ("old", dict(trained_agent_steps=None), r"old/eval-sampled.json lacks trained_agent_steps"),
+    ("other", dict(preset="1"), r"other/eval-sampled.json: preset is '1', not '3.1'"),
+    ("greedy", dict(policy="greedy"), r"greedy/eval-greedy.json: policy is 'greedy', not "
+                                      r"'sampled'"),
+    ("short", dict(run_total_steps=100_000), r"run_total_steps is 100000, not 1000000"),
+])
+def test_the_onset_refuses_evaluations_it_cannot_place(tmp_path, where, fields, match):
+    from baselines import run_long
+
+    with pytest.raises(ValueError, match=r"no evaluations below .*: run the script first"):
+        run_long.write_onset(tmp_path)
+    long_evaluation(tmp_path, "by-step/2000/seed0", 0, 2000, [2.0])
+    long_evaluation(tmp_path, where, 0, 2000, [9.0], **fields)
+    if fields.get("trained_agent_steps", 1) is None:
+        path = tmp_path / where / "eval-sampled.json"
+        path.write_text(json.dumps({k: v for k, v in json.loads(path.read_text()).items()
+                                    if k != "trained_agent_steps"}))
+    with pytest.raises(ValueError, match=match):
         run_long.evaluations_by_step(tmp_path)
 
 
