@@ -35,11 +35,11 @@ GAME_HYPERPARAMETERS = {"Breakout": EVIDENCE_HYPERPARAMETERS,
                                        num_minibatches=16)}
 
 
-def results_name(path: Path) -> str:
-    """``path`` as the recorded results name a checkpoint: from RESULTS where it lies inside
-    (the name then holds in any checkout), else in full."""
+def results_name(path: Path, root: Path = RESULTS) -> str:
+    """``path`` as recorded results name a checkpoint: from ``root`` where it lies inside (the
+    name then holds in any checkout), else in full."""
     path = Path(path).resolve()
-    return str(path.relative_to(RESULTS)) if path.is_relative_to(RESULTS) else str(path)
+    return str(path.relative_to(root)) if path.is_relative_to(root) else str(path)
 
 
 def run_dir(game: str, preset: str, agent: str, seed: int) -> Path:

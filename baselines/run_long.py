@@ -28,6 +28,7 @@ import numpy as np
 from baselines.run_evidence import EVAL_EPISODES, RESULTS, results_name
 
 OUT = RESULTS / "boxing-1M"
+REPOSITORY = RESULTS.parents[1]  # checkpoints are named from here, as in boxing-probes/
 GAME, PRESET, TOTAL_STEPS = "Boxing", "3.1", 1_000_000
 SEEDS = (0, 7, 13)
 STAGES = (100, 250, 500, 750)  # iterations (x 1024 agent steps) whose checkpoints are evaluated
@@ -52,7 +53,7 @@ def evaluate_once(checkpoint: Path, out_dir: Path, *, episodes: int, num_envs: i
     config = load_checkpoint(checkpoint)["config"]
     result = evaluate(config["game"], config["preset"], policy="sampled", episodes=episodes,
                       num_envs=num_envs, checkpoint=checkpoint, progress=progress)
-    result["checkpoint"] = results_name(checkpoint)
+    result["checkpoint"] = results_name(checkpoint, REPOSITORY)
     write_result(result, out_dir)
     return result
 
@@ -238,8 +239,7 @@ def main() -> None:
     parser.add_argument("--seeds", nargs="+", type=int, choices=SEEDS, default=SEEDS,
                         help="train and evaluate only these seeds (default: all)")
     parser.add_argument("--out", type=Path, default=OUT,
-                        help=f"results directory (default {results_name(OUT)} in "
-                             "baselines/results)")
+                        help=f"results directory (default {results_name(OUT, REPOSITORY)})")
     args = parser.parse_args()
     for seed in args.seeds:
         train_in_stages(long_config(seed), args.out / "runs" / f"seed{seed}",
