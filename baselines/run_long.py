@@ -5,7 +5,7 @@ aside and evaluated by the paper's protocol (run_evidence.py's: sampled policy, 
 seed + 10000) as the final one is, so the evaluations trace the onset of learning.  A stage stops
 the run with a checkpoint, as an interruption would, and the next resumes it exactly as if it
 had never stopped, so the script can be stopped and started again (on this 2-core CPU a seed
-takes about an hour, and each evaluation about three minutes).
+takes about an hour, and each evaluation about two minutes).
 
     python baselines/run_long.py [--seeds 0 7 13] [--out DIR]
 

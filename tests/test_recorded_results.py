@@ -55,6 +55,36 @@ def test_the_committed_table_is_what_the_recorded_evaluations_give():
     assert rebuilt == (BASELINE_RESULTS / "table.md").read_text()
 
 
+def test_the_million_step_runs_used_run_longs_config_and_every_stage_is_evaluated():
+    from baselines.ppo import PPOConfig
+    from baselines.run_long import OUT, SEEDS, STAGES, long_config
+
+    runs = sorted((OUT / "runs").glob("seed*"))
+    assert runs, f"no runs in {OUT / 'runs'}"
+    for run in runs:
+        seed = int(run.name.removeprefix("seed"))
+        assert seed in SEEDS
+        missing = [name for name in PPO_FILES if not (run / name).is_file()]
+        assert not missing, f"{run} lacks {missing}"
+        recorded = PPOConfig.from_recorded(json.loads((run / "config.json").read_text()))
+        assert dataclasses.asdict(recorded) == dataclasses.asdict(long_config(seed))
+        assert json.loads((run / "summary.json").read_text())["finished"]
+        for stage in STAGES:
+            steps = stage * recorded.batch_size
+            assert (OUT / "by-step" / str(steps) / f"seed{seed}" / "eval-sampled.json").is_file()
+
+
+def test_the_committed_onset_and_table_of_the_million_step_runs_are_what_they_give():
+    from baselines.run_long import (OUT, SEEDS, evaluations_by_step, onset_table,
+                                    random_evaluations)
+    from baselines.table import aggregate, load_evaluations, markdown
+
+    assert (OUT / "onset.md").read_text() == onset_table(evaluations_by_step(OUT),
+                                                         random_evaluations(SEEDS))
+    table = markdown(aggregate(load_evaluations(OUT / "runs")))
+    assert (OUT / "table.md").read_text().startswith(table)
+
+
 def _skip_unless_made_with(made_with: dict, packages=("jax", "jaxlib", "ale-py")) -> None:
     from importlib.metadata import version
 
@@ -150,6 +180,15 @@ def test_a_recorded_million_step_run_replays_its_first_iterations_from_its_seed(
 def test_the_readme_shows_the_committed_table():
     readme = (ROOT / "README.md").read_text()
     rows = [line for line in (BASELINE_RESULTS / "table.md").read_text().splitlines()
+            if line.startswith("| ") and "---" not in line]
+    assert rows and [row for row in rows if row not in readme] == []
+
+
+def test_the_million_step_readme_shows_the_committed_onset():
+    from baselines.run_long import OUT
+
+    readme = (OUT / "README.md").read_text()
+    rows = [line for line in (OUT / "onset.md").read_text().splitlines()
             if line.startswith("| ") and "---" not in line]
     assert rows and [row for row in rows if row not in readme] == []
 
