@@ -41,17 +41,16 @@ def long_config(seed: int):
     return PPOConfig(game=GAME, preset=PRESET, seed=seed, total_steps=TOTAL_STEPS)
 
 
-def evaluate_once(checkpoint: Path, out_dir: Path, *, episodes: int, num_envs: int,
+def evaluate_once(config, checkpoint: Path, out_dir: Path, *, episodes: int, num_envs: int,
                   progress: bool) -> dict | None:
-    """Evaluate ``checkpoint`` (sampled policy) into ``out_dir``/eval-sampled.json unless that
-    file exists; returns the new result, or None when there was one already."""
+    """Evaluate ``checkpoint`` of a run of ``config`` (sampled policy) into
+    ``out_dir``/eval-sampled.json unless that file exists; returns the new result, or None when
+    there was one already."""
     from baselines.evaluate import evaluate, result_path, write_result
-    from baselines.ppo import load_checkpoint
 
     if result_path(out_dir, "sampled").exists():
         return None
-    config = load_checkpoint(checkpoint)["config"]
-    result = evaluate(config["game"], config["preset"], policy="sampled", episodes=episodes,
+    result = evaluate(config.game, config.preset, policy="sampled", episodes=episodes,
                       num_envs=num_envs, checkpoint=checkpoint, progress=progress)
     result["checkpoint"] = results_name(checkpoint, REPOSITORY)
     write_result(result, out_dir)
@@ -107,11 +106,12 @@ def train_in_stages(config, run: Path, by_step: Path, stages=STAGES, *,
             aside.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(checkpoint, aside / "checkpoint.tmp")
             (aside / "checkpoint.tmp").replace(aside / "checkpoint.pkl")
-        evaluate_once(aside / "checkpoint.pkl", aside, episodes=episodes, num_envs=num_envs,
-                      progress=progress)
+        evaluate_once(config, aside / "checkpoint.pkl", aside, episodes=episodes,
+                      num_envs=num_envs, progress=progress)
     if not (run / "summary.json").exists():
         train(config, run, resume=_iterations_done(run) > 0, progress=progress)
-    evaluate_once(checkpoint, run, episodes=episodes, num_envs=num_envs, progress=progress)
+    evaluate_once(config, checkpoint, run, episodes=episodes, num_envs=num_envs,
+                  progress=progress)
 
 
 def evaluations_by_step(out: Path) -> dict[int, dict[int, dict]]:
