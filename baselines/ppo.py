@@ -535,11 +535,12 @@ def _checked_checkpoint(config: PPOConfig, ckpt_path: Path, stop_after: int | No
     differ = [f"{k} {recorded[k]!r} there, {v!r} now"
               for k, v in dataclasses.asdict(config).items() if recorded[k] != v]
     if differ:
-        raise ValueError(f"--resume: {ckpt_path} was trained with a different config: "
-                         + "; ".join(differ))
+        raise ValueError(f"cannot resume from {ckpt_path}: it was trained with a different "
+                         "config: " + "; ".join(differ))
     missing = [k for k in RESUME_STATE if k not in ckpt]
     if missing:
-        raise ValueError(f"--resume: {ckpt_path} lacks {missing}, which a run needs to continue")
+        raise ValueError(f"cannot resume from {ckpt_path}: it lacks {missing}, which a run "
+                         "needs to continue")
     if stop_after is not None and stop_after < ckpt["iteration"]:
         raise ValueError(f"stop_after {stop_after} is before {ckpt_path}'s iteration "
                          f"{ckpt['iteration']}: a run cannot go back")
@@ -561,7 +562,7 @@ def _software_parts(ckpt: dict, start: int, made_with: dict, path: Path) -> list
         changed += [f"{name} {version!r} -> {made_with['packages'][name]!r}"
                     for name, version in before.get("packages", {}).items()
                     if version != made_with["packages"].get(name)]
-        warnings.warn(f"--resume: {path} was trained so far with other software "
+        warnings.warn(f"resuming from {path}: it was trained so far with other software "
                       f"({'; '.join(changed)}): from iteration {start} on, the run may not "
                       "match an uninterrupted one bit for bit", stacklevel=3)
     return parts + [dict(from_iteration=start, software=made_with)]

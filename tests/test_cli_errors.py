@@ -123,7 +123,7 @@ def test_resume_from_a_checkpoint_without_its_run_state_says_what_is_missing(fil
         a for name in ("network", "num_envs", "num_steps", "num_minibatches")
         for a in ("--set", f"{name}={getattr(config, name)}")]
     err = run_main(argv, files, capsys)
-    assert "--resume: D/run/checkpoint.pkl lacks ['iteration', 'opt_state', 'key', 'obs', " \
+    assert "cannot resume from D/run/checkpoint.pkl: it lacks ['iteration', 'opt_state', 'key', 'obs', " \
            "'envs', 'elapsed_s']" in err
 
 
