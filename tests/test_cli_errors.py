@@ -123,8 +123,8 @@ def test_resume_from_a_checkpoint_without_its_run_state_says_what_is_missing(fil
         a for name in ("network", "num_envs", "num_steps", "num_minibatches")
         for a in ("--set", f"{name}={getattr(config, name)}")]
     err = run_main(argv, files, capsys)
-    assert "cannot resume from D/run/checkpoint.pkl: it lacks ['iteration', 'opt_state', 'key', 'obs', " \
-           "'envs', 'elapsed_s']" in err
+    assert "cannot resume from D/run/checkpoint.pkl: it lacks ['iteration', 'opt_state', " \
+           "'key', 'obs', 'envs', 'elapsed_s']" in err
 
 
 @pytest.mark.parametrize("argv, message", [
