@@ -59,10 +59,9 @@ def test_the_million_step_runs_used_run_longs_config_and_every_stage_is_evaluate
     from baselines.ppo import PPOConfig
     from baselines.run_long import OUT, SEEDS, STAGES, long_config
 
-    runs = sorted((OUT / "runs").glob("seed*"))
-    assert sorted(int(run.name.removeprefix("seed")) for run in runs) == sorted(SEEDS)
-    for run in runs:
-        seed = int(run.name.removeprefix("seed"))
+    runs = {int(run.name.removeprefix("seed")): run for run in (OUT / "runs").glob("seed*")}
+    assert sorted(runs) == sorted(SEEDS)
+    for seed, run in runs.items():
         missing = [name for name in PPO_FILES if not (run / name).is_file()]
         assert not missing, f"{run} lacks {missing}"
         recorded = PPOConfig.from_recorded(json.loads((run / "config.json").read_text()))
@@ -176,20 +175,23 @@ def test_a_recorded_million_step_run_replays_its_first_iterations_from_its_seed(
     assert _replay_first_iterations(OUT / "runs" / "seed0", 2, tmp_path) == []
 
 
-def test_the_readme_shows_the_committed_table():
-    readme = (ROOT / "README.md").read_text()
-    rows = [line for line in (BASELINE_RESULTS / "table.md").read_text().splitlines()
+def _rows_missing_from(readme: Path, table: Path) -> list[str]:
+    """The markdown ``table``'s rows (header included) that ``readme`` does not show; the
+    table must have some."""
+    rows = [line for line in table.read_text().splitlines()
             if line.startswith("| ") and "---" not in line]
-    assert rows and [row for row in rows if row not in readme] == []
+    assert rows, f"{table} has no rows"
+    return [row for row in rows if row not in readme.read_text()]
+
+
+def test_the_readme_shows_the_committed_table():
+    assert _rows_missing_from(ROOT / "README.md", BASELINE_RESULTS / "table.md") == []
 
 
 def test_the_million_step_readme_shows_the_committed_onset():
     from baselines.run_long import OUT
 
-    readme = (OUT / "README.md").read_text()
-    rows = [line for line in (OUT / "onset.md").read_text().splitlines()
-            if line.startswith("| ") and "---" not in line]
-    assert rows and [row for row in rows if row not in readme] == []
+    assert _rows_missing_from(OUT / "README.md", OUT / "onset.md") == []
 
 
 @pytest.mark.parametrize("pattern", ["*-vm.json", "*-vm.md", "*-vm*.png", "jax-stages-*.json",
