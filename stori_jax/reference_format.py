@@ -10,6 +10,9 @@ The reference format is a nested dict (or the same flattened with dotted keys), 
     partial_observation.type ('crop'|'blackout'|'ram'), .mode, .prob
 
 A 2.2 config takes its secondary concept's parameters from the same dict's other sections.
+``partial_observation.mode`` '0' is the specification's "none": a '3.2' config with it hides
+nothing and loads as 3.1 (its type and prob are still checked); as the secondary concept of a
+'2.2' config it would make concept 2 the default game, which the specification does not allow.
 
 Every key above is accepted whatever ``stochasticity_type`` selects (the reference's config files
 carry all sections); the sections of types that are not selected are read by nothing and their
@@ -21,6 +24,7 @@ from __future__ import annotations
 
 from typing import Any, Mapping
 
+from stori_jax.checks import check_probability
 from stori_jax.config import (DRIFT_SCHEDULES, MASK_KINDS, SECONDARY_TYPES, ActionNoise, Config,
                               ConceptDrift, ObservationMask, RandomEvent)
 
@@ -125,6 +129,9 @@ def _count(value) -> int:
     return int(value)
 
 
+_NO_MASK = 0  # partial_observation.mode of the spec's "none" in every mask table
+
+
 def _concept(kind: str, r: _Reader) -> Config:
     if kind == "1":
         return Config(action_noise=ActionNoise(
@@ -138,6 +145,9 @@ def _concept(kind: str, r: _Reader) -> Config:
         mode = r.get(f"{_OBS}.mode", _mode, "a mode ('1', '2', ...)")
         prob = (r.get(f"{_OBS}.prob", _probability, "a probability")
                 if f"{_OBS}.prob" in r.flat else 1.0)
+        if mode == _NO_MASK:  # the spec's "none": nothing hidden, the default game
+            check_probability("ObservationMask.prob", prob)
+            return Config()
         return Config(observation=ObservationMask(kind=kind_, mode=mode, prob=prob))
     return Config()
 
@@ -163,11 +173,17 @@ def config_from_reference(d: Mapping[str, Any], game: str | None = None) -> Conf
         kind = r.choice("stochasticity_type", _TYPES)
         if kind == "2.2":
             secondary_type = r.choice(f"{_DRIFT}.secondary_concept_type", SECONDARY_TYPES)
+            secondary = _concept(secondary_type, r)
+            if secondary.type == "3.1":  # a '3.2' secondary of mode '0'
+                raise ValueError(f"reference config '{_OBS}.mode' '0' is the spec's 'none': as "
+                                 "the secondary concept of a '2.2' config it would make concept 2 "
+                                 "the default game (3.1), which is not a valid secondary; give a "
+                                 "mode >= 1")
             config = Config(drift=ConceptDrift(
                 schedule=r.choice(f"{_DRIFT}.temporal_mode", DRIFT_SCHEDULES),
                 period=r.get(f"{_DRIFT}.temporal_threshold", _count,
                              "an int number of agent steps"),
-                secondary=_concept(secondary_type, r)))
+                secondary=secondary))
         else:
             config = _concept(kind, r)
         return config.for_game(game) if game is not None else config

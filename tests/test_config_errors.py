@@ -104,8 +104,29 @@ def test_mode_0_none_says_to_leave_the_mask_out():
     with pytest.raises(ValueError, match=r"mode 0 is the spec's 'none' for kind 'crop'"):
         ObservationMask("crop", 0)
     with pytest.raises(ValueError, match=r"mode 0 is the spec's 'none' for kind 'blackout'"):
+        ObservationMask("blackout", 0, 1.0)
+
+
+@pytest.mark.parametrize("kind", ["crop", "blackout", "ram"])
+def test_reference_mode_0_is_the_specs_none(kind):
+    """A reference '3.2' config of mode '0' hides nothing: it loads as the default game (3.1),
+    its type and prob still checked; as a 2.2 secondary it is refused (3.1 is no secondary)."""
+    for game in ("Breakout", "Boxing", "Gopher", "BankHeist", None):
+        config = Config.from_reference({"stochasticity_type": "3.2", "partial_observation": {
+            "type": kind, "mode": "0", "prob": 0.5}}, game=game)
+        assert config == Config(game=game) and config.type == "3.1"
+    with pytest.raises(ValueError, match=r"'partial_observation\.prob': ObservationMask\.prob "
+                                         rf"must be in {PROB}, got 1\.5"):
         Config.from_reference({"stochasticity_type": "3.2", "partial_observation": {
-            "type": "blackout", "mode": "0", "prob": 1.0}})
+            "type": kind, "mode": "0", "prob": 1.5}})
+    with pytest.raises(ValueError, match=r"'partial_observation\.type' must be one of"):
+        Config.from_reference({"stochasticity_type": "3.2", "partial_observation": {
+            "type": kind.upper(), "mode": "0"}})
+    with pytest.raises(ValueError, match=r"'partial_observation\.mode' '0' is the spec's 'none': "
+                                         r"as the secondary concept of a '2\.2' config it would "
+                                         r"make concept 2 the default game \(3\.1\)"):
+        Config.from_reference(drift_ref(**{"partial_observation.type": kind,
+                                           "partial_observation.mode": "0"}))
 
 
 @pytest.mark.parametrize("mode", [6, -1])

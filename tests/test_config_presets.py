@@ -309,12 +309,6 @@ def test_reference_conflicting_nested_and_dotted_keys_are_rejected():
     assert Config.from_reference(d) == Config(observation=ObservationMask("crop", 1, 0.5))
 
 
-def test_reference_mode_0_is_still_refused():
-    d = {"stochasticity_type": "3.2", "partial_observation": {"type": "crop", "mode": "0"}}
-    with pytest.raises(ValueError, match="mode"):
-        Config.from_reference(d)
-
-
 def test_the_presets_without_a_random_draw():
     """A preset draws nothing at random when it has no action noise or event, masks only at
     p = 1 and no torch, and no gradual drift (eval's note that a greedy policy plays one
