@@ -25,7 +25,7 @@ def _range_text(minimum, maximum) -> str:
     return ""
 
 
-def _shown(value: Any) -> str:
+def shown(value: Any) -> str:
     """``repr(value)``, cut short if long (a 400-digit int, a big list)."""
     text = repr(value)
     return text if len(text) <= 60 else f"{text[:40]}... ({len(text)} characters)"
@@ -54,10 +54,10 @@ def check_int(name: str, value: Any, minimum: int | None = None,
     value = _unwrapped(value)
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise ValueError(f"{name} must be an int{' ' + bounds if bounds else ''}, "
-                         f"got {_shown(value)}")
+                         f"got {shown(value)}")
     value = int(value)
     if (minimum is not None and value < minimum) or (maximum is not None and value > maximum):
-        raise ValueError(f"{name} must be {bounds}, got {value}")
+        raise ValueError(f"{name} must be {bounds}, got {shown(value)}")
     return value
 
 
@@ -72,11 +72,11 @@ def check_real(name: str, value: Any, minimum: float | None = None,
         kind = wanted = f"a finite number{' ' + bounds if bounds else ''}"
     value = _unwrapped(value)
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ValueError(f"{name} must be {kind}, got {_shown(value)}")
+        raise ValueError(f"{name} must be {kind}, got {shown(value)}")
     try:
         number = float(value)
     except OverflowError:  # an int too large for a float
-        raise ValueError(f"{name} must be {wanted}, got {_shown(value)}") from None
+        raise ValueError(f"{name} must be {wanted}, got {shown(value)}") from None
     if (not math.isfinite(number) or (minimum is not None and number < minimum)
             or (maximum is not None and number > maximum)):
         raise ValueError(f"{name} must be {wanted}, got {number}")

@@ -19,9 +19,9 @@ from __future__ import annotations
 import dataclasses
 import numbers
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import AbstractSet, Any, Mapping
 
-from .checks import MAX_INT32, check_int, check_probability
+from .checks import MAX_INT32, check_int, check_probability, shown
 from .games import get_game
 from .games.base import CROP_MODES, is_torch
 
@@ -33,9 +33,13 @@ SECONDARY_TYPES = ("1", "2.1", "3.2")
 
 
 def _check_choice(owner: str, name: str, value: Any, allowed) -> Any:
-    if value not in allowed:
-        raise ValueError(f"{owner}.{name} must be one of {list(allowed)}, got {value!r}")
-    return value
+    """The one of ``allowed`` that ``value`` is, as its plain type (numpy's str_ becomes a str;
+    a one-element array compares equal to a string but is none: it would reach the jitted code
+    as an unhashable static argument)."""
+    for choice in allowed:
+        if isinstance(value, type(choice)) and value == choice:
+            return choice
+    raise ValueError(f"{owner}.{name} must be one of {list(allowed)}, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -56,8 +60,9 @@ class ActionNoise:
         if not isinstance(self.sticky, bool):
             raise ValueError(f"ActionNoise.sticky must be True or False, got {self.sticky!r}")
         if self.replacement_actions is not None:
-            try:
-                actions = tuple(self.replacement_actions)
+            try:  # a sequence: the draw indexes it (a dict or a set would pick the order)
+                actions = (() if isinstance(self.replacement_actions, (Mapping, AbstractSet, str))
+                           else tuple(self.replacement_actions))
             except TypeError:
                 actions = ()
             if not actions or any(isinstance(a, bool) or not isinstance(a, numbers.Integral)
@@ -103,7 +108,8 @@ class ObservationMask:
     prob: float = 1.0
 
     def __post_init__(self):
-        _check_choice("ObservationMask", "kind", self.kind, MASK_KINDS)
+        object.__setattr__(self, "kind",
+                           _check_choice("ObservationMask", "kind", self.kind, MASK_KINDS))
         mode = check_int("ObservationMask.mode", self.mode)
         object.__setattr__(self, "mode", mode)
         if mode == 0:
@@ -131,14 +137,15 @@ class ConceptDrift:
     secondary: "Config"
 
     def __post_init__(self):
-        _check_choice("ConceptDrift", "schedule", self.schedule, DRIFT_SCHEDULES)
+        object.__setattr__(self, "schedule", _check_choice("ConceptDrift", "schedule",
+                                                           self.schedule, DRIFT_SCHEDULES))
         period = check_int("ConceptDrift.period", self.period)
         object.__setattr__(self, "period", period)
         if period < 1:
             raise ValueError(f"ConceptDrift.period (T) must be >= 1 agent step, got {period}")
         if period > MAX_INT32:  # episode steps are counted in int32
             raise ValueError(f"ConceptDrift.period (T) must be <= {MAX_INT32} agent steps, "
-                             f"got {period}")
+                             f"got {shown(period)}")
         if not isinstance(self.secondary, Config):
             raise ValueError("ConceptDrift.secondary must be a Config of type "
                              f"{list(SECONDARY_TYPES)}, got {self.secondary!r}")
@@ -173,11 +180,15 @@ class Config:
         if not isinstance(self.ram_observation, bool):
             raise ValueError(f"Config.ram_observation must be True or False, "
                              f"got {self.ram_observation!r}")
-        _check_choice("Config", "granularity", self.granularity, GRANULARITIES)
+        object.__setattr__(self, "granularity", _check_choice("Config", "granularity",
+                                                              self.granularity, GRANULARITIES))
         if self.ram_observation and self.observation is not None:
             raise ValueError("Config.ram_observation (type 0) observes the RAM, so it cannot be "
                              "combined with an observation mask (type 3.2)")
         derived = self._derive_type()
+        if not isinstance(self.type, str):  # "" (the default) derives it; 0 or None is no type
+            raise ValueError(f"Config.type must be one of {list(TAXONOMY_TYPES + ('mixed',))} "
+                             f"(or left out), got {self.type!r}")
         if self.type:
             _check_choice("Config", "type", self.type, TAXONOMY_TYPES + ("mixed",))
             if self.type != derived:

@@ -22,7 +22,10 @@ dotted) with different values.
 
 from __future__ import annotations
 
+import numbers
 from typing import Any, Mapping
+
+import numpy as np
 
 from stori_jax.checks import check_probability
 from stori_jax.config import (DRIFT_SCHEDULES, MASK_KINDS, SECONDARY_TYPES, ActionNoise, Config,
@@ -92,7 +95,7 @@ class _Reader:
         value = self.flat[key]
         try:
             return cast(value)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):  # OverflowError: int(1e400), float(10**400)
             raise ValueError(f"reference config {key!r} must be {what}, got {value!r}") from None
 
     def choice(self, key: str, allowed) -> str:
@@ -111,20 +114,26 @@ def _mode(value) -> int:
     return int(text)
 
 
-def _probability(value) -> float:
-    if isinstance(value, bool):  # float(True) would silently read as 1.0
+def _probability(value):
+    """A number as given (the Config's check takes numpy and float32 values as ``preset`` does),
+    or a string of one; not a bool (float(True) would silently read as 1.0)."""
+    if isinstance(value, str):
+        return float(value)
+    if isinstance(value, bool) or not (isinstance(value, numbers.Real)
+                                       or getattr(value, "shape", None) == ()):  # 0-d arrays
         raise TypeError(value)
-    return float(value)
+    return value
 
 
 def _count(value) -> int:
-    """An int, an integral float (300.0) or a string of digits; not a bool, and never a float
-    silently truncated (300.7)."""
-    if isinstance(value, bool):
+    """An int (numpy's too), an integral float (300.0) or a string of digits; not a bool, and
+    never a float silently truncated (300.7)."""
+    if isinstance(value, (bool, np.bool_)):
         raise TypeError(value)
-    if isinstance(value, float) and not value.is_integer():
+    if isinstance(value, numbers.Real) and not isinstance(value, numbers.Integral) \
+            and not float(value).is_integer():
         raise ValueError(value)
-    if not isinstance(value, (int, float, str)):
+    if not isinstance(value, (numbers.Real, str)):
         raise TypeError(value)
     return int(value)
 

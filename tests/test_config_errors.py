@@ -528,3 +528,59 @@ def test_reference_bad_event_probability_names_its_own_key():
     with pytest.raises(ValueError, match=re.escape(f"reference config '{key}': RandomEvent.prob")):
         Config.from_reference({"stochasticity_type": "2.1",
                                f"{IS}.action_independent_random.mode": "1", key: 1.5})
+
+
+# -- from a bad-input walk-through ----------------------------------------------------------------
+
+CHOICE_FIELDS = [  # (owner, field, value, part made with that value)
+    ("ObservationMask", "kind", "crop", lambda v: ObservationMask(v, 1)),
+    ("ConceptDrift", "schedule", "sudden",
+     lambda v: ConceptDrift(v, 3, Config(action_noise=ActionNoise(0.1)))),
+    ("Config", "granularity", "step", lambda v: Config(granularity=v)),
+]
+
+
+@pytest.mark.parametrize("owner, field, value, make_part", CHOICE_FIELDS)
+def test_a_choice_is_a_string_not_an_array_that_equals_one(owner, field, value, make_part):
+    """A one-element array equals its string but is unhashable: refused up front, not inside
+    jit; numpy's str_ is taken and stored as a plain str."""
+    part = make_part(np.str_(value))
+    assert type(getattr(part, field)) is str and getattr(part, field) == value
+    hash(part)
+    with pytest.raises(ValueError, match=rf"{owner}\.{field} must be one of .*, got array\("):
+        make_part(np.array([value]))
+
+
+@pytest.mark.parametrize("value", [0, None, False, [], 3.1])
+def test_config_type_given_must_be_a_type_name(value):
+    with pytest.raises(ValueError, match=r"Config\.type must be one of \['0', '1', '2\.1', '2\.2', "
+                                         rf"'3\.1', '3\.2', 'mixed'\] \(or left out\), got "
+                                         rf"{re.escape(repr(value))}"):
+        Config(action_noise=ActionNoise(0.3), type=value)
+
+
+@pytest.mark.parametrize("value", [{0: "a", 1: "b"}, {1, 2}, frozenset({1}), "01"])
+def test_replacement_actions_are_a_sequence(value):
+    with pytest.raises(ValueError, match=r"replacement_actions must be a non-empty tuple"):
+        ActionNoise(0.3, value)
+
+
+def test_reference_numbers_as_the_config_takes_them():
+    """numpy ints are counts, a float32 probability keeps the value a preset gives it, and a
+    number too large for a float is a named error (it was an OverflowError)."""
+    prob_key = f"{IS}.action_dependent.stochastic_action_prob"
+    for prob in (np.float32(0.3), np.float64(0.3), "0.3"):
+        assert Config.from_reference(ref("1", **{prob_key: prob}), game="Breakout") \
+            == preset("Breakout", "1")
+    for threshold in (np.int64(300), np.int32(300), np.float64(300.0)):
+        assert Config.from_reference(drift_ref(**{f"{DRIFT}.temporal_threshold": threshold})
+                                     ).drift.period == 300
+    with pytest.raises(ValueError, match=re.escape(f"'{prob_key}': ActionNoise.prob must be in "
+                                                   "[0, 1], got 1000") + r".*\(401 characters\)"):
+        Config.from_reference(ref("1", **{prob_key: 10**400}))
+    with pytest.raises(ValueError, match=r"temporal_threshold': ConceptDrift\.period \(T\) must be "
+                                         r"<= 2147483647 agent steps, got 1000.*\(401 characters\)"):
+        Config.from_reference(drift_ref(**{f"{DRIFT}.temporal_threshold": 10**400}))
+    with pytest.raises(ValueError, match=r"temporal_threshold' must be an int number of agent "
+                                         r"steps, got inf"):
+        Config.from_reference(drift_ref(**{f"{DRIFT}.temporal_threshold": 1e400}))
