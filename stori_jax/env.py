@@ -19,8 +19,8 @@ from stori_jax.backends.layout import RAM_SIZE, SCREEN, shared_bytes
 from stori_jax.backends.subproc import (MAX_TIMEOUT_S, EnvClosedError, InterruptedStepError,
                                         SubprocBackend, WorkersLate)
 from stori_jax.backends.worker import emulator_seed
-from stori_jax.checks import (MAX_INT32, MAX_SEED, check_actions, check_int,
-                              check_real)
+from stori_jax.checks import (MAX_INT32, MAX_SEED, check_actions, check_int, check_real,
+                              shown)
 from stori_jax.config import Config, GRANULARITIES
 from stori_jax.core import (Draws, EnvState, WorkerOutputs, before_step, finish_step,
                             initial_state)
@@ -592,6 +592,8 @@ class Env:
                 "plan", "seed", "state", "reset_pending", "emulators"}:
             raise ValueError("snapshot must be a dict returned by Env.snapshot()")
         differs = _differences(snapshot["plan"], self.plan)
+        if not differs:  # an env alike: are the parts what its snapshot() gives?
+            self._check_snapshot_parts(snapshot)
         if not differs and hasattr(self.backend, "restore_differences"):
             differs = self.backend.restore_differences(snapshot["emulators"])
         if differs:
@@ -613,6 +615,29 @@ class Env:
         self._needs_reset = self._reseed_due = False
 
     # -- internals ------------------------------------------------------------------------------
+
+    def _check_snapshot_parts(self, snapshot: dict) -> None:
+        """Refuse, before anything changes, a snapshot whose parts are not what
+        :meth:`snapshot` gives for an env of this size (an edited or damaged one)."""
+        check_int("snapshot['seed']", snapshot["seed"], 0, MAX_SEED)
+        emulators = snapshot["emulators"]
+        if not isinstance(emulators, (list, tuple)) or not all(
+                isinstance(e, dict) for e in emulators):
+            raise ValueError("snapshot['emulators'] must be the list of emulator states "
+                             f"Env.snapshot() gives, got {type(emulators).__name__}")
+        pending = snapshot["reset_pending"]
+        if getattr(pending, "dtype", None) != np.bool_ or np.shape(pending) != (self.num_envs,):
+            raise ValueError(f"snapshot['reset_pending'] must be a bool array of shape "
+                             f"({self.num_envs},), got {shown(pending)}")
+        state = snapshot["state"]
+        expected = [(name, np.shape(x), jnp.result_type(x))
+                    for name, x in zip(EnvState._fields, self._state)]
+        if not isinstance(state, tuple) or len(state) != len(expected) or any(
+                np.shape(x) != shape or getattr(x, "dtype", None) != dtype
+                for x, (_, shape, dtype) in zip(state, expected)):
+            raise ValueError("snapshot['state'] must be the EnvState Env.snapshot() gives for "
+                             "this env: " + ", ".join(f"{name} {dtype}{list(shape)}"
+                                                      for name, shape, dtype in expected))
 
     def _host_draws(self, actions: np.ndarray) -> Draws:
         """The Draws of a step without randomness, built on the host (numpy)."""

@@ -114,6 +114,31 @@ def test_restore_checks_the_env_is_alike():
         assert other.seed == 0
 
 
+def test_restore_checks_the_snapshots_parts_before_changing_anything():
+    """An edited or damaged snapshot is a ValueError naming the part, and the env goes on as
+    it was (a bad state or reset_pending used to fail inside JAX at the next step)."""
+    with stori_jax.make("Breakout", "2.1", num_envs=2, seed=0, num_workers=1) as env:
+        env.reset()
+        snap = env.snapshot()
+        expected = play(env, 3, seed=1)
+        env.restore(snap)
+        for part, value, message in [
+                ("emulators", None, r"snapshot\['emulators'\] must be the list"),
+                ("emulators", [None, None], r"snapshot\['emulators'\] must be the list"),
+                ("state", None, r"snapshot\['state'\] must be the EnvState .*key uint32\[2\]"),
+                ("state", tuple(np.zeros(3) for _ in snap["state"]), r"snapshot\['state'\]"),
+                ("state", tuple(snap["state"])[:3], r"snapshot\['state'\]"),
+                ("reset_pending", "abc", r"reset_pending'\] must be a bool array of shape \(2,\)"),
+                ("reset_pending", np.array([True]), r"reset_pending'\] must be a bool array"),
+                ("reset_pending", np.zeros(2, np.int64), r"reset_pending'\] must be a bool array"),
+                ("seed", -5, r"snapshot\['seed'\] must be in \[0, 2147483647\], got -5"),
+                ("seed", "abc", r"snapshot\['seed'\] must be an int")]:
+            with pytest.raises(ValueError, match=message):
+                env.restore(dict(snap, **{part: value}))
+        assert env.seed == 0
+        assert_same(expected, play(env, 3, seed=1))
+
+
 def test_snapshot_needs_a_settled_env():
     with stori_jax.make("Breakout", num_envs=2, seed=0, num_workers=1) as env:
         with pytest.raises(RuntimeError, match="reset"):
