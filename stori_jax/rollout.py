@@ -7,7 +7,7 @@ from typing import Any, Callable, NamedTuple
 import jax
 import jax.numpy as jnp
 
-from stori_jax.checks import check_int
+from stori_jax.checks import check_int, shown
 
 
 class Trajectory(NamedTuple):
@@ -54,10 +54,10 @@ def rollout(env, policy_fn: Callable[[Any, jax.Array, jax.Array], jax.Array], pa
                          f"{type(env).__name__}")
     num_steps = check_int("num_steps", num_steps, 1)
     if not _is_prng_key(key):
-        shown = (f"an array of shape {key.shape} and dtype {key.dtype}"
-                 if isinstance(key, jax.Array) else repr(key))
+        given = (f"an array of shape {key.shape} and dtype {key.dtype}"
+                 if isinstance(key, jax.Array) else shown(key))
         raise ValueError(f"key must be a JAX PRNG key (jax.random.key(seed) or "
-                         f"jax.random.PRNGKey(seed)), got {shown}")
+                         f"jax.random.PRNGKey(seed)), got {given}")
     if obs is not None and seed is not None:
         raise ValueError("rollout takes obs (go on from the env's current observation) or seed "
                          "(reset the env with that seed first), not both")
@@ -66,10 +66,12 @@ def rollout(env, policy_fn: Callable[[Any, jax.Array, jax.Array], jax.Array], pa
         obs, _ = env.reset(seed=seed)
     else:
         space = env.observation_space
-        if tuple(jnp.shape(obs)) != space.shape or jnp.result_type(obs) != space.dtype:
+        if not hasattr(obs, "dtype") or tuple(obs.shape) != space.shape \
+                or jnp.result_type(obs) != space.dtype:  # a list has no dtype of its own
             raise ValueError(f"obs must be the env's current observation, of shape {space.shape} "
-                             f"and dtype {space.dtype} (the last step's), got shape "
-                             f"{tuple(jnp.shape(obs))} and dtype {jnp.result_type(obs)}")
+                             f"and dtype {space.dtype} (the last step's), got "
+                             + (f"shape {tuple(obs.shape)} and dtype {obs.dtype}"
+                                if hasattr(obs, "dtype") else shown(obs)))
     steps = []
     for _ in range(num_steps):
         key, step_key = jax.random.split(key)

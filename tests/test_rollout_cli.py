@@ -153,7 +153,8 @@ def test_rollout_rejects_bad_arguments():
                                  np.int64(2))
         assert traj.action.shape == (2, 1)
         for bad, shown in ((np.zeros(128, np.uint8), r"shape \(128,\) and dtype uint8"),
-                           (np.zeros((1, 128), np.float32), r"shape \(1, 128\) and dtype float32")):
+                           (np.zeros((1, 128), np.float32), r"shape \(1, 128\) and dtype float32"),
+                           ([[0] * 128], r"\[\[0, 0, 0, .*\(\d+ characters\)")):  # no dtype
             with pytest.raises(ValueError, match=r"obs must be the env's current observation, of "
                                                  r"shape \(1, 128\) and dtype uint8 \(the last "
                                                  rf"step's\), got {shown}"):
