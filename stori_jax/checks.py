@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import numbers
-from typing import Any
+from typing import AbstractSet, Any, Mapping
 
 import numpy as np
 
@@ -94,6 +94,28 @@ def check_probability(name: str, value: Any) -> float:
         if np.float32(decimal) == np.float32(prob):  # all but a rare double rounding
             prob = decimal
     return prob
+
+
+def check_bool(name: str, value: Any) -> bool:
+    """``value`` as a bool: True or False (numpy's too), not a truthy string or number."""
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    raise ValueError(f"{name} must be True or False, got {shown(value)}")
+
+
+def check_action_indices(name: str, values: Any,
+                         what: str = "a non-empty sequence of action indices >= 0") -> tuple:
+    """``values`` as a tuple of ints >= 0, in order: the table a uniform draw indexes (a dict,
+    set or string would pick the order or be characters, so they are refused)."""
+    try:
+        actions = (() if isinstance(values, (Mapping, AbstractSet, str, bytes))
+                   else tuple(_unwrapped(a) for a in values))
+    except TypeError:
+        actions = ()
+    if not actions or any(isinstance(a, bool) or not isinstance(a, numbers.Integral) or a < 0
+                          for a in actions):
+        raise ValueError(f"{name} must be {what}, got {shown(values)}")
+    return tuple(int(a) for a in actions)
 
 
 def unless_traced(check, name: str, value: Any, *bounds):

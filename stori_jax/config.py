@@ -17,11 +17,11 @@ when ``game`` is given, and again by :func:`stori_jax.make`.
 from __future__ import annotations
 
 import dataclasses
-import numbers
 from dataclasses import dataclass, field
-from typing import AbstractSet, Any, Mapping
+from typing import Any, Mapping
 
-from .checks import MAX_INT32, check_int, check_probability, shown
+from .checks import (MAX_INT32, check_action_indices, check_bool, check_int,
+                     check_probability, shown)
 from .games import get_game
 from .games.base import CROP_MODES, is_torch
 
@@ -57,25 +57,18 @@ class ActionNoise:
 
     def __post_init__(self):
         object.__setattr__(self, "prob", check_probability("ActionNoise.prob", self.prob))
-        if not isinstance(self.sticky, bool):
-            raise ValueError(f"ActionNoise.sticky must be True or False, got {self.sticky!r}")
+        object.__setattr__(self, "sticky", check_bool("ActionNoise.sticky", self.sticky))
         if self.replacement_actions is not None:
-            try:  # a sequence: the draw indexes it (a dict or a set would pick the order)
-                actions = (() if isinstance(self.replacement_actions, (Mapping, AbstractSet, str))
-                           else tuple(self.replacement_actions))
-            except TypeError:
-                actions = ()
-            if not actions or any(isinstance(a, bool) or not isinstance(a, numbers.Integral)
-                                  or a < 0 for a in actions):
-                raise ValueError("ActionNoise.replacement_actions must be a non-empty tuple of "
-                                 f"action indices >= 0 (or None), got {self.replacement_actions!r}")
+            actions = check_action_indices(
+                "ActionNoise.replacement_actions", self.replacement_actions,
+                "a non-empty tuple of action indices >= 0 (or None)")
             if len(set(actions)) < len(actions):  # a repeat would weigh the uniform draw
                 raise ValueError("ActionNoise.replacement_actions must name each action once, "
                                  f"got {self.replacement_actions!r}")
             if self.sticky:
                 raise ValueError("ActionNoise.replacement_actions cannot be combined with "
                                  "sticky=True (sticky repeats the previous action)")
-            object.__setattr__(self, "replacement_actions", tuple(int(a) for a in actions))
+            object.__setattr__(self, "replacement_actions", actions)
 
 
 @dataclass(frozen=True)

@@ -91,7 +91,8 @@ def before_step(plan: Plan, state: EnvState, actions: jax.Array, resetting: bool
         n = plan.noise
         slots, corrupted = F.corrupt_actions(
             F.purpose_keys(keys, F.Purpose.ACTIONS), actions, state.prev_executed,
-            prob=n.prob, num_slots=plan.num_slots, replacement=n.replacement, sticky=n.sticky,
+            prob=n.prob, num_slots=plan.num_slots, sticky=n.sticky,
+            replacement=None if n.sticky else n.replacement,
             active=_component_active(n.under_drift, concept))
     else:
         slots = jnp.broadcast_to(actions[:, None], (b, plan.num_slots))

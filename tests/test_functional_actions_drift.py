@@ -314,6 +314,66 @@ def test_the_pure_functions_refuse_bad_parameters_and_take_traced_ones():
         0, 0, 1, 1]
 
 
+def test_the_pure_functions_refuse_bad_static_arguments():
+    """Static arguments (counts, flags, action tables, purposes, shapes) are checked when
+    traced: each was a JAX, numpy or Python error from deep inside, or was silently taken (a
+    string flag as True, a float count or purpose truncated, a negative action executed)."""
+    from stori_jax.functional import (apply_masks, atari84_frame, draw_mask_decisions,
+                                      event_uniforms, extract_labels, max_pool, purpose_keys,
+                                      region_mask)
+    from stori_jax.functional.masks import CROP_REGIONS
+    from stori_jax.functional.preprocess import area_resize
+
+    keys, zeros = keys_of(0)[:4], jnp.zeros(4, jnp.int32)
+    hidden, fill = region_mask(CROP_REGIONS[1])
+    frames = jnp.zeros((4, 2, 210, 160, 3), jnp.uint8)
+    purpose = r"purpose must be a stori_jax\.functional\.Purpose \(ACTIONS = 1, .*NOOPS = 5\)"
+    table = r"replacement must be a non-empty sequence of action indices >= 0 when sticky=False"
+    for call, match in (
+            (lambda: env_keys(jax.random.PRNGKey(0), 2.5), r"num_envs must be an int >= 1"),
+            (lambda: env_keys(jax.random.PRNGKey(0), -1), r"num_envs must be >= 1, got -1"),
+            (lambda: purpose_keys(keys, 99), purpose + ", got 99"),
+            (lambda: purpose_keys(keys, 1.0), purpose + ", got 1.0"),
+            (lambda: purpose_keys(keys, "ACTIONS"), purpose),
+            (lambda: event_uniforms(keys, 0), r"num_slots must be >= 1, got 0"),
+            (lambda: corrupt_actions(keys, zeros, zeros, prob=0.5, num_slots=1,
+                                     replacement=(-3,)), table + r", got \(-3,\)"),
+            (lambda: corrupt_actions(keys, zeros, zeros, prob=0.5, num_slots=1,
+                                     replacement=(0.5, 1.5)), table),
+            (lambda: corrupt_actions(keys, zeros, zeros, prob=0.5, num_slots=1, replacement=3),
+             table + ", got 3"),
+            (lambda: corrupt_actions(keys, zeros, zeros, prob=0.5, num_slots=1, sticky="no"),
+             r"sticky must be True or False, got 'no'"),
+            (lambda: corrupt_actions(keys, zeros, zeros, prob=0.5, num_slots=1, sticky=True,
+                                     replacement=(0, 1)), r"replacement must be None when sticky"),
+            (lambda: draw_mask_decisions(keys, prob=0.5, per_frame="no", torch=False),
+             r"per_frame must be True or False, got 'no'"),
+            (lambda: extract_labels(None, jnp.zeros((1, 128), jnp.uint8)),
+             r"game must be a game's name or its GameSpec"),
+            (lambda: region_mask([1, 2]), r"region_mask takes Regions"),
+            (lambda: apply_masks(frames, jnp.zeros(4, bool), hidden=hidden, fill=fill),
+             r"apply must have shape \(4, 2\), got \(4,\)"),
+            (lambda: apply_masks(frames[:, 0], jnp.zeros((4, 2), bool), hidden=hidden, fill=fill),
+             r"frames must have shape \(B, S, 210, 160, 3\), got \(4, 210, 160, 3\)"),
+            (lambda: max_pool(jnp.zeros(5)), r"frames must have shape \(B, 2, \.\.\.\)"),
+            (lambda: atari84_frame(jnp.zeros((2, 210, 160), jnp.uint8)),
+             r"screen must have shape \(B, height, width, 3\)"),
+            (lambda: area_resize(jnp.zeros((2, 210, 160), jnp.uint8), 0, 5, y_axis=1, x_axis=2),
+             r"height must be >= 1, got 0"),
+            (lambda: area_resize(jnp.zeros((2, 210, 160), jnp.uint8), 5, 5, y_axis=1, x_axis=1),
+             r"y_axis and x_axis must be two different axes")):
+        with pytest.raises(ValueError, match=match):
+            call()
+    # what they take: numpy ints and bools, an array as the action table, a one-screen batch
+    assert purpose_keys(keys, np.int64(1)).shape == purpose_keys(keys, Purpose.ACTIONS).shape
+    executed, _ = corrupt_actions(keys, zeros, zeros, prob=1.0, num_slots=2,
+                                  replacement=np.array([3]))
+    assert executed.tolist() == [[3, 3]] * 4
+    assert draw_mask_decisions(keys, prob=1.0, per_frame=np.True_, torch=False)[0].all()
+    assert apply_masks(frames[:, :1], jnp.ones((4, 1), bool), hidden=hidden,
+                       fill=fill).shape == (4, 1, 210, 160, 3)
+
+
 # ---------------------------------------------------------------------------------------------
 # Keys and event uniforms
 # ---------------------------------------------------------------------------------------------

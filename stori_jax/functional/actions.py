@@ -7,7 +7,8 @@ from typing import Sequence
 import jax
 import jax.numpy as jnp
 
-from stori_jax.checks import check_int, check_probability, unless_traced
+from stori_jax.checks import (check_action_indices, check_bool, check_int, check_probability,
+                              unless_traced)
 
 
 def corrupt_actions(keys: jax.Array, actions: jax.Array, prev_executed: jax.Array, *,
@@ -25,9 +26,14 @@ def corrupt_actions(keys: jax.Array, actions: jax.Array, prev_executed: jax.Arra
     """
     prob = unless_traced(check_probability, "prob", prob)
     num_slots = check_int("num_slots", num_slots, 1)
-    if not sticky and not replacement:
-        raise ValueError("corrupt_actions: replacement must be a non-empty sequence of action "
-                         "indices when sticky=False")
+    sticky = check_bool("sticky", sticky)
+    if sticky and replacement is not None:
+        raise ValueError("corrupt_actions: replacement must be None when sticky=True (sticky "
+                         "repeats the previous executed action)")
+    if not sticky:
+        replacement = check_action_indices(
+            "replacement", replacement,
+            "a non-empty sequence of action indices >= 0 when sticky=False")
     actions = jnp.asarray(actions, jnp.int32)
     prev_executed = jnp.asarray(prev_executed, jnp.int32)
 

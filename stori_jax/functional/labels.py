@@ -6,6 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from stori_jax.backends.layout import RAM_SIZE
+from stori_jax.games.base import GameSpec
 
 
 def extract_labels(game, ram) -> dict:
@@ -15,6 +16,9 @@ def extract_labels(game, ram) -> dict:
         from stori_jax.games import get_game
 
         game = get_game(game)  # a clear error for a game that is none
+    elif not isinstance(game, GameSpec):
+        raise ValueError(f"game must be a game's name or its GameSpec (stori_jax.get_game), "
+                         f"got {game!r}")
     ram = jnp.asarray(ram)
     dtype = np.dtype(ram.dtype)
     if ram.ndim == 0 or ram.shape[-1] != RAM_SIZE:

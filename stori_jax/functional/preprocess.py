@@ -13,6 +13,8 @@ import functools
 import jax.numpy as jnp
 import numpy as np
 
+from stori_jax.checks import check_int
+
 ATARI84 = 84
 STACK = 4
 FRAMES_LAYOUTS = ("pair", "pooled", "pooled_chw")  # how a backend hands over its screens
@@ -21,6 +23,9 @@ DREAMER64 = 64
 
 def max_pool(frames):
     """(B, 2, ...) -> (B, ...): elementwise max of the two screens."""
+    if np.ndim(frames) < 2 or np.shape(frames)[1] != 2:
+        raise ValueError(f"frames must have shape (B, 2, ...) (two screens per env), got "
+                         f"{tuple(np.shape(frames))}")
     return jnp.maximum(frames[:, 0], frames[:, 1])
 
 
@@ -66,6 +71,13 @@ def _resize_axis(x, axis: int, out_size: int):
 def area_resize(image, height: int, width: int, *, y_axis: int, x_axis: int):
     """Exact area-average resize of uint8 images along (y_axis, x_axis), in integer arithmetic
     (bit-identical on every machine); rounds half up; returns uint8."""
+    height, width = check_int("height", height, 1), check_int("width", width, 1)
+    ndim = np.ndim(image)
+    for name, axis in (("y_axis", y_axis), ("x_axis", x_axis)):
+        check_int(name, axis, -ndim, ndim - 1)
+    if y_axis % ndim == x_axis % ndim:
+        raise ValueError(f"y_axis and x_axis must be two different axes, got {y_axis} and "
+                         f"{x_axis}")
     in_h, in_w = image.shape[y_axis], image.shape[x_axis]
     x = image.astype(jnp.int32)  # sums stay below 255 * in_h * in_w < 2**31
     x = _resize_axis(x, y_axis, height)
@@ -98,8 +110,15 @@ def pool_screens(frames, layout: str = "pair"):
     raise ValueError(f"frames layout must be one of {list(FRAMES_LAYOUTS)}, got {layout!r}")
 
 
+def _check_screens(screen) -> None:
+    if np.ndim(screen) != 4 or np.shape(screen)[-1] != 3:
+        raise ValueError(f"screen must have shape (B, height, width, 3) (RGB screens, e.g. "
+                         f"(B, 210, 160, 3)), got {tuple(np.shape(screen))}")
+
+
 def atari84_frame(screen):
     """(B, 210, 160, 3) uint8 max-pooled screen -> (B, 84, 84) uint8: luma, area resize."""
+    _check_screens(screen)
     return area_resize(to_gray(screen), ATARI84, ATARI84, y_axis=1, x_axis=2)
 
 
@@ -117,4 +136,5 @@ def push_frame(stack, frame, new_episode):
 
 def dreamer64(screen):
     """(B, 210, 160, 3) uint8 max-pooled screen -> (B, 64, 64, 3) uint8: area resize RGB."""
+    _check_screens(screen)
     return area_resize(screen, DREAMER64, DREAMER64, y_axis=1, x_axis=2)
