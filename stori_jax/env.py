@@ -93,6 +93,11 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
     frame_skip = check_int("frame_skip", frame_skip, 1)
     max_episode_frames = check_int("max_episode_frames", max_episode_frames, 1, MAX_INT32)
     noop_max = check_int("noop_max", noop_max, 0, MAX_INT32 - 1)
+    if noop_max >= max_episode_frames:  # the no-op frames count toward the cap
+        raise ValueError(f"noop_max must be < max_episode_frames ({max_episode_frames}), got "
+                         f"{noop_max}: a reset's no-op frames count toward an episode's frame "
+                         f"cap, so the cap would end episodes before the agent acts (and a reset "
+                         f"would start episode after episode)")
     if obs is None:
         obs = "ram" if cfg.ram_observation else "atari84"
     if obs not in OBS_KINDS:
@@ -126,6 +131,8 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
     if num_workers is not None:
         num_workers = check_int("num_workers", num_workers, 0)
     if num_workers == 0:
+        if inline_envs is not None:
+            inline_envs = check_int("inline_envs", inline_envs)  # True == 1, but is no count
         if inline_envs not in (None, num_envs):
             why = ("inside a daemonic process, which may start none, the default num_workers "
                    "is 0: it emulates" if daemonic_default else "num_workers=0 emulates")

@@ -540,6 +540,13 @@ def test_step_before_reset_and_send_recv_misuse():
     (dict(game="Breakout", num_envs=2, inline_envs=2), r"inline_envs must be in \[0, num_envs - 1 = "
                                                        r"1\] .*, got 2"),
     (dict(game="Breakout", num_envs=2, inline_envs=1.0), r"inline_envs must be an int, got 1\.0"),
+    (dict(game="Breakout", num_envs=1, num_workers=0, inline_envs=True),
+     r"inline_envs must be an int, got True"),
+    (dict(game="Breakout", noop_max=100, max_episode_frames=100),
+     r"noop_max must be < max_episode_frames \(100\), got 100: a reset's no-op frames count"),
+    (dict(game="Breakout", noop_max=108000), r"noop_max must be < max_episode_frames \(108000\)"),
+    (dict(game="Breakout", noop_max=200, max_episode_frames=100, backend="envpool"),
+     r"noop_max must be < max_episode_frames"),
     (dict(game=["Breakout"]), r"game must be a non-empty string, got \['Breakout'\]"),
     (dict(game="Breakout", num_envs=0), r"num_envs must be >= 1"),
     (dict(game="Breakout", granularity="episode"),
