@@ -104,6 +104,8 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
         raise ValueError(f"obs must be one of {list(OBS_KINDS)}, got {obs!r}")
     if backend == "subproc":
         check_memory(num_envs, frame_skip, screens=obs != "ram")
+    elif backend == "envpool":  # its buffers hold a screen per env whatever obs is
+        check_memory(num_envs, frame_skip, buffers="envpool's frame buffers")
     if cfg.ram_observation and obs != "ram":
         raise ValueError(f"type 0 (ram_observation) observes the RAM: obs must be 'ram', got {obs!r}")
     if obs == "ram" and any(name == "observation" for name, _, _ in cfg.components()):
@@ -199,10 +201,12 @@ def default_split(num_envs: int, cores: int) -> tuple[int, int]:
     return workers, num_envs // (workers + 1)
 
 
-def check_memory(num_envs: int, frame_skip: int, screens: bool = True) -> None:
+def check_memory(num_envs: int, frame_skip: int, screens: bool = True,
+                 buffers: str = "shared buffers") -> None:
     """Refuse a batch whose shared buffers alone would not fit in this machine's memory, before
     anything is allocated (a typo of num_envs would otherwise allocate for minutes, then fail
-    deep inside multiprocessing)."""
+    deep inside multiprocessing, or in envpool's C++ as std::bad_alloc).  ``buffers`` names
+    them in the error: envpool's are estimated by the subproc backend's, a lower bound."""
     need = shared_bytes(num_envs, frame_skip, screens)
     try:
         have = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
@@ -210,7 +214,7 @@ def check_memory(num_envs: int, frame_skip: int, screens: bool = True) -> None:
         return
     if need > have:
         raise ValueError(f"num_envs={num_envs} with frame_skip={frame_skip} needs "
-                         f"{need / 2**30:.1f} GiB of shared buffers (about "
+                         f"{need / 2**30:.1f} GiB of {buffers} (about "
                          f"{shared_bytes(1, frame_skip, screens) / 2**10:.1f} KiB per env), "
                          f"more than this machine's {have / 2**30:.1f} GiB: choose a smaller "
                          "num_envs or frame_skip")

@@ -710,6 +710,9 @@ def test_an_absurd_batch_is_refused_before_anything_is_allocated():
                                          r"of shared buffers .* choose a smaller num_envs"):
         make("Breakout", num_envs=10**9)
     assert time.monotonic() - started < 30
+    with pytest.raises(ValueError, match=r"num_envs=1000000000 with frame_skip=4 needs .* GiB "
+                                         r"of envpool's frame buffers .* choose a smaller"):
+        make("Breakout", num_envs=10**9, backend="envpool", autoreset=False, granularity="step")
 
 
 def test_a_ram_observation_shares_no_screen_buffers():
