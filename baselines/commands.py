@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from baselines.evaluate import CHECKPOINT_POLICIES, EVAL_NUM_ENVS
+from stori_jax.env import MAX_EPISODE_FRAMES
 
 
 def add_parsers(sub) -> None:
@@ -53,9 +54,9 @@ def add_parsers(sub) -> None:
     ev.add_argument("--num-envs", type=int, default=EVAL_NUM_ENVS,
                     help=f"envs the episodes are split over (default {EVAL_NUM_ENVS}, as the "
                          "recorded evaluations)")
-    ev.add_argument("--max-episode-frames", type=int, default=108_000,
+    ev.add_argument("--max-episode-frames", type=int, default=MAX_EPISODE_FRAMES,
                     help="emulator frames after which an episode is cut off (truncated; "
-                         "default 108000, 30 minutes of play, as in training)")
+                         f"default {MAX_EPISODE_FRAMES}, 30 minutes of play, as in training)")
     ev.add_argument("--out", type=Path, default=None,
                     help="directory for eval-<policy>.json (default: the checkpoint's, or "
                          "results/train/<game>-<preset>/random-seed<S>)")

@@ -48,10 +48,14 @@ def resolve_config(game: str, preset: str | None, config: Config | None) -> Conf
     return config
 
 
+FRAME_SKIP = 4  # make's default: emulator frames per agent step
+MAX_EPISODE_FRAMES = 108_000  # make's default cap: 30 minutes of play at 60 frames a second
+
+
 def make(game: str, preset: str | None = None, *, config: Config | None = None,
          num_envs: int, seed: int, backend: str = "subproc", num_workers: int | None = None,
-         obs: str | None = None, frame_skip: int = 4, granularity: str | None = None,
-         max_episode_frames: int = 108000, noop_max: int = 0, autoreset: bool = True,
+         obs: str | None = None, frame_skip: int = FRAME_SKIP, granularity: str | None = None,
+         max_episode_frames: int = MAX_EPISODE_FRAMES, noop_max: int = 0, autoreset: bool = True,
          inline_envs: int | None = None) -> "Env":
     """A batched STORI environment of ``num_envs`` emulators.
 

@@ -130,12 +130,21 @@ DRIFT_SEARCH = 5  # ... for at most this many times the picture's steps
 AFTER_SWITCH = 100  # agent steps a 2.2 picture plays past T by default
 
 
+def episode_step_cap() -> int:
+    """Agent steps an episode of a picture's envs (make's frame cap and frame skip) lasts at
+    most: concept 2 of a T at or past it never comes."""
+    from stori_jax.env import FRAME_SKIP, MAX_EPISODE_FRAMES
+
+    return -(-MAX_EPISODE_FRAMES // FRAME_SKIP)
+
+
 def default_steps(config: Config) -> int:
     """A contact sheet's steps by default: SHEET_STEPS, or for a 2.2 config at least enough to
-    show concept 2 (T + AFTER_SWITCH)."""
-    if config.drift is None:
+    show concept 2 (T + AFTER_SWITCH, at most an episode's steps; SHEET_STEPS where concept 2
+    comes after the episode's frame cap)."""
+    if config.drift is None or config.drift.period >= episode_step_cap():
         return SHEET_STEPS
-    return max(SHEET_STEPS, config.drift.period + AFTER_SWITCH)
+    return min(max(SHEET_STEPS, config.drift.period + AFTER_SWITCH), episode_step_cap())
 
 
 def drift_showcase(game: str, config: Config, steps: int, seed: int = 0, *,
@@ -152,6 +161,9 @@ def drift_showcase(game: str, config: Config, steps: int, seed: int = 0, *,
     if config.drift is None:
         return Showcase()
     period = config.drift.period
+    if period >= episode_step_cap():
+        return Showcase(note=f"concept 2 begins after agent step {period} of an episode, past "
+                             f"the frame cap's {episode_step_cap()} steps: never, not shown")
     if steps <= period:  # concept 2 begins at the episode's agent step T + 1 at the earliest
         return Showcase(note=f"concept 2 begins after agent step {period} of an episode: "
                              "not shown")

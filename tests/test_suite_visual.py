@@ -406,8 +406,8 @@ def _episodes(game, config, seed, num_envs, steps):
     return episodes
 
 
-SUDDEN_BLACKOUT_AT_220 = stori_jax.Config(drift=stori_jax.ConceptDrift(
-    "sudden", 220, stori_jax.Config(observation=stori_jax.ObservationMask("blackout", 10, 1.0))))
+BLACKOUT = stori_jax.Config(observation=stori_jax.ObservationMask("blackout", 10, 1.0))
+SUDDEN_BLACKOUT_AT_220 = stori_jax.Config(drift=stori_jax.ConceptDrift("sudden", 220, BLACKOUT))
 
 
 def test_a_drift_picture_follows_the_first_episode_that_reaches_concept_2(monkeypatch):
@@ -446,6 +446,17 @@ def test_a_drift_picture_that_cannot_show_concept_2_says_why(monkeypatch, tmp_pa
     assert visual.drift_showcase("Breakout", config, 220) == visual.Showcase(
         note="concept 2 begins after agent step 220 of an episode: not shown")
     assert visual.drift_showcase("Breakout", stori_jax.Config(), 50) == visual.Showcase()
+    # a T at or past an episode's 27000 steps (108000 frames at frame skip 4): no episode
+    # reaches it, so no search (a T of 2**31 - 1 searched for 5 x (T + 100) steps) and the
+    # sheet plays its usual 200 steps
+    for period in (27000, 2**31 - 1):
+        never = stori_jax.Config(drift=stori_jax.ConceptDrift("sudden", period, BLACKOUT))
+        assert visual.drift_showcase("Breakout", never, period + 100) == visual.Showcase(
+            note=f"concept 2 begins after agent step {period} of an episode, past the frame "
+                 "cap's 27000 steps: never, not shown")
+        assert visual.default_steps(never) == visual.SHEET_STEPS
+    latest = stori_jax.Config(drift=stori_jax.ConceptDrift("sudden", 26999, BLACKOUT))
+    assert visual.default_steps(latest) == 27000  # T + 100 cut to the episode's steps
     monkeypatch.setattr(visual, "DRIFT_CANDIDATES", 1)
     monkeypatch.setattr(visual, "DRIFT_SEARCH", 1)
     # seed 0's env 0 plays a 200-odd-step first episode: none reaches step 221 within 230 steps
