@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from baselines.evaluate import CHECKPOINT_POLICIES, stori_game
-from stori_jax.checks import check_int, check_real
+from stori_jax.checks import MAX_SEED, check_int, check_real
 from stori_jax.presets import canonical_preset
 
 # STORI_SPEC section 11: mean evaluation return ± std over seeds 0, 7, 13 at 100k agent steps
@@ -244,10 +244,19 @@ def learning_curves(results_dir: Path) -> dict[tuple[str, str], list[tuple]]:
         missing = [k for k in ("game", "preset", "seed") if k not in config]
         if missing:
             raise ValueError(f"{config_path} lacks {missing}: not a training run's config")
-        with open(path, newline="") as f:
-            reader = csv.DictReader(f)
-            rows = list(reader)
-        missing = [k for k in ("global_step", "return") if k not in (reader.fieldnames or [])]
+        try:
+            seed = check_int("seed", config["seed"], 0, MAX_SEED)
+            game = stori_game(config["game"])
+            preset = canonical_preset(game, config["preset"])
+        except ValueError as e:
+            raise ValueError(f"{config_path}: {e}") from None
+        try:
+            with open(path, newline="") as f:
+                reader = csv.DictReader(f)
+                rows, columns = list(reader), reader.fieldnames or []
+        except (UnicodeDecodeError, csv.Error) as e:
+            raise ValueError(f"{path} is not a training run's episodes.csv: {e}") from None
+        missing = [k for k in ("global_step", "return") if k not in columns]
         if missing:
             raise ValueError(f"{path} lacks the columns {missing}: not a training run's "
                              "episodes.csv")
@@ -256,9 +265,8 @@ def learning_curves(results_dir: Path) -> dict[tuple[str, str], list[tuple]]:
             returns = np.array([float(r["return"]) for r in rows])
         except (TypeError, ValueError) as e:  # TypeError: a row shorter than the header
             raise ValueError(f"{path}: a global_step or return is not a number ({e})") from None
-        game = stori_game(config["game"])
-        curves[(game, canonical_preset(game, config["preset"]))].append(
-            (steps, returns, config["seed"], _last_step(path.parent, steps), config))
+        curves[(game, preset)].append(
+            (steps, returns, seed, _last_step(path.parent, steps), config))
     for runs in curves.values():
         runs.sort(key=lambda run: run[2])
     return curves

@@ -1260,6 +1260,30 @@ def test_table_errors(tmp_path):
         load_evaluations(tmp_path / "pong")
 
 
+@pytest.mark.parametrize("config_edit, episodes, message", [
+    (dict(seed=[1]), None, r"config\.json: seed must be an int in \[0, 2147483647\], got \[1\]"),
+    (dict(seed="x"), None, r"config\.json: seed must be an int"),
+    (dict(seed=-4), None, r"config\.json: seed must be in \[0, 2147483647\], got -4"),
+    (dict(preset="9.9"), None, r"config\.json: unknown preset '9\.9'"),
+    ({}, b"", r"episodes\.csv lacks the columns \['global_step', 'return'\]"),
+    ({}, b"global_step,return\n\xff\xfe,1\n", r"episodes\.csv is not a training run's "
+                                                r"episodes\.csv: 'utf-8' codec"),
+])
+def test_the_curves_name_the_file_a_bad_training_run_has(tmp_path, config_edit, episodes,
+                                                          message):
+    """A config.json seed of [1] was a bare TypeError (unhashable) and "x" or -4 were taken;
+    an empty episodes.csv was "I/O operation on closed file" and a non-UTF-8 one named no
+    file."""
+    run = tmp_path / "Breakout-3.1" / "ppo-seed0"
+    run.mkdir(parents=True)
+    (run / "config.json").write_text(json.dumps(dict(dict(game="Breakout", preset="3.1", seed=0),
+                                                     **config_edit)))
+    (run / "episodes.csv").write_bytes(b"global_step,env,return,length\n64,0,1.0,5\n"
+                                       if episodes is None else episodes)
+    with pytest.raises(ValueError, match=message):
+        learning_curves(tmp_path)
+
+
 def test_table_joins_spellings_and_names_differing_seed_sets(tmp_path):
     fake_eval(tmp_path, "Breakout", "3.1", "ppo", 0, 1.0)
     fake_eval(tmp_path, "breakout", "3.1", "random", 0, 2.0)
