@@ -312,7 +312,9 @@ def make_envs(config: PPOConfig):
     chooses actions meanwhile), one core of the machine left for the agent; seeds
     :func:`train_env_seeds`.  The split over workers never changes the results."""
     import stori_jax
+    from stori_jax.env import FRAME_SKIP, check_memory
 
+    check_memory(config.num_envs, FRAME_SKIP)  # both halves: named by the whole batch
     half = config.num_envs // 2
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     workers = max(1, min(half, ((cores or 2) - 1) // 2))

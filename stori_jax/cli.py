@@ -132,12 +132,18 @@ def selected_presets(games, presets):
 
 
 def _cmd_suite(args) -> int:
+    from stori_jax.env import FRAME_SKIP, check_memory
     from stori_jax.suite import run_suite
 
     for name, value in (("--episodes", args.episodes), ("--num-envs", args.num_envs),
                         ("--max-steps", args.max_steps)):
         check_int(name, value, 1)
     check_int("--seed", args.seed, 0, MAX_SEED)
+    try:  # before any preset runs, in the command's words
+        check_memory(args.num_envs, FRAME_SKIP)
+    except ValueError as error:
+        raise ValueError(str(error).replace("num_envs=", "--num-envs ").replace(
+            "a smaller num_envs or frame_skip", "a smaller --num-envs")) from None
     if args.out is not None:
         check_out("--out", args.out, directory=True)
     games = args.games

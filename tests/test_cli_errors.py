@@ -132,6 +132,11 @@ def test_resume_from_a_checkpoint_without_its_run_state_says_what_is_missing(fil
     (["suite", "--games", "gopher", "--presets", "3.2A"],
      "--presets: unknown ['3.2A']; allowed for Gopher: ['1', '2.1', '2.2', '3.1', '3.2']"),
     (["suite", "--seed", "-1"], "--seed must be in [0, 2147483647], got -1"),
+    # an absurd batch, refused before any preset runs; train names the whole batch it was set
+    (["suite", "--num-envs", "100000000"], "--num-envs 100000000 with frame_skip=4 needs"),
+    (["train", "ppo", "--game", "Breakout", "--set", "num_envs=100000000", "--set",
+      "num_steps=1", "--steps", "100000000", "--out", "D/big"],
+     "num_envs=100000000 with frame_skip=4 needs"),
     (["eval", "--random", "--game", "Breakout", "--preset", "3.1", "--policy", "greedy"],
      "--policy applies to checkpoints only"),
     (["eval", "--random", "--game", "Breakout", "--preset", "3.1", "--seed", "-1"],
