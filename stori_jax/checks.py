@@ -137,6 +137,9 @@ def check_actions(actions, num_envs: int, num_actions: int):
                          "vmap or lax.scan (they step emulator processes from the host); "
                          "inside a traced function step through env.xla() (README, 'Stepping "
                          "inside jax.jit')")
+    if np.ma.isMaskedArray(actions):  # np.asarray would step its masked entries' values
+        raise ValueError(f"actions must be a plain array of {expected}, not a masked array "
+                         "(its masked entries would be stepped with the values they hide)")
     try:
         a = np.asarray(actions)
     except Exception as e:  # noqa: BLE001 - anything not array-like

@@ -448,6 +448,14 @@ def test_actions_that_are_no_numbers_are_named(breakout, actions, shown):
         breakout.step(actions)
 
 
+def test_masked_actions_are_refused(breakout):
+    """np.asarray drops a mask: the hidden values were stepped as if they were actions."""
+    actions = np.ma.masked_array([0, 1, 2], mask=[False, True, False])
+    with pytest.raises(ValueError, match=r"actions must be a plain array of shape \(3,\) of ints "
+                                         r"in \[0, 3\], not a masked array"):
+        breakout.step(actions)
+
+
 @pytest.mark.parametrize("actions", [[0, 1, 4], [-1, 0, 0], np.array([0, 0, 255], np.uint8)])
 def test_out_of_range_actions(breakout, actions):
     with pytest.raises(ValueError, match=r"range.*\(3,\).*\[0, 3\]"):
