@@ -14,7 +14,7 @@ from pathlib import Path
 from stori_jax.checks import MAX_SEED, check_int
 from stori_jax.config import GRANULARITIES
 from stori_jax.plan import OBS_KINDS
-from stori_jax.visual import AFTER_SWITCH, SHEET_STEPS
+from stori_jax.visual import AFTER_SWITCH, SHEET_STEPS, episode_step_cap
 
 
 def _cmd_list(args) -> int:
@@ -290,7 +290,7 @@ def build_parser() -> argparse.ArgumentParser:
                            help="agent steps to play (or until the episode ends); the sheet "
                                 f"shows moments spread over them (default {SHEET_STEPS}; a 2.2 "
                                 f"preset's T + {AFTER_SWITCH} if longer, so that it reaches "
-                                "concept 2)")
+                                f"concept 2, at most an episode's {episode_step_cap()} steps)")
         else:
             p.add_argument("--max-steps", type=int, default=1000,
                            help="agent steps at most, if the episode is longer (default 1000)")

@@ -97,11 +97,6 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
     frame_skip = check_int("frame_skip", frame_skip, 1)
     max_episode_frames = check_int("max_episode_frames", max_episode_frames, 1, MAX_INT32)
     noop_max = check_int("noop_max", noop_max, 0, MAX_INT32 - 1)
-    if noop_max >= max_episode_frames:  # the no-op frames count toward the cap
-        raise ValueError(f"noop_max must be < max_episode_frames ({max_episode_frames}), got "
-                         f"{noop_max}: a reset's no-op frames count toward an episode's frame "
-                         f"cap, so the cap would end episodes before the agent acts (and a reset "
-                         f"would start episode after episode)")
     if obs is None:
         obs = "ram" if cfg.ram_observation else "atari84"
     if obs not in OBS_KINDS:

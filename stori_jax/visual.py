@@ -138,11 +138,17 @@ def episode_step_cap() -> int:
     return -(-MAX_EPISODE_FRAMES // FRAME_SKIP)
 
 
+def first_concept2_step(drift) -> int:
+    """The 0-indexed episode step from which concept 2 can come: T (sudden, cyclic), T + 1
+    (gradual: P(concept 2) = (k - T) / T is 0 at k = T)."""
+    return drift.period + (drift.schedule == "gradual")
+
+
 def default_steps(config: Config) -> int:
     """A contact sheet's steps by default: SHEET_STEPS, or for a 2.2 config at least enough to
     show concept 2 (T + AFTER_SWITCH, at most an episode's steps; SHEET_STEPS where concept 2
     comes after the episode's frame cap)."""
-    if config.drift is None or config.drift.period >= episode_step_cap():
+    if config.drift is None or first_concept2_step(config.drift) >= episode_step_cap():
         return SHEET_STEPS
     return min(max(SHEET_STEPS, config.drift.period + AFTER_SWITCH), episode_step_cap())
 
@@ -161,7 +167,7 @@ def drift_showcase(game: str, config: Config, steps: int, seed: int = 0, *,
     if config.drift is None:
         return Showcase()
     period = config.drift.period
-    if period >= episode_step_cap():
+    if first_concept2_step(config.drift) >= episode_step_cap():
         return Showcase(note=f"concept 2 begins after agent step {period} of an episode, past "
                              f"the frame cap's {episode_step_cap()} steps: never, not shown")
     if steps <= period:  # concept 2 begins at the episode's agent step T + 1 at the earliest
@@ -227,8 +233,8 @@ def contact_sheet(game: str, name: str, config: Config, path: Path, *,
                   steps: int | None = None, moments: int = 4, seed: int = 0,
                   progress: bool = False) -> Path:
     """A PNG: columns are moments of one run, the top row the 3.1 twin, the bottom the preset.
-    ``steps``: agent steps to play at most (default 200, a 2.2 preset's T + 100 if longer); a
-    2.2 preset follows an env whose episode reaches concept 2 (see :func:`drift_showcase`)."""
+    ``steps``: agent steps to play at most (default 200, a 2.2 preset's T + 100 if longer, at
+    most an episode's 27000 steps, :func:`default_steps`); a 2.2 preset follows an env whose episode reaches concept 2 (see :func:`drift_showcase`)."""
     Image, ImageDraw = _pil()
     steps = default_steps(config) if steps is None else steps
     showcase = drift_showcase(game, config, steps, seed, progress=_search_label(game, name,

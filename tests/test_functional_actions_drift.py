@@ -364,6 +364,14 @@ def test_the_pure_functions_refuse_bad_static_arguments():
              r"y_axis and x_axis must be two different axes")):
         with pytest.raises(ValueError, match=match):
             call()
+    # inside jit too, when the function is traced (the static arguments have their values)
+    with pytest.raises(ValueError, match=purpose + ", got 99"):
+        jax.jit(lambda k: purpose_keys(k, 99))(keys)
+    with pytest.raises(ValueError, match=r"sticky must be True or False, got 'no'"):
+        jax.jit(lambda p: corrupt_actions(keys, zeros, zeros, prob=p, num_slots=1,
+                                          sticky="no"))(0.5)
+    with pytest.raises(ValueError, match=r"apply must have shape \(4, 2\), got \(4,\)"):
+        jax.jit(lambda f: apply_masks(f, jnp.zeros(4, bool), hidden=hidden, fill=fill))(frames)
     # what they take: numpy ints and bools, an array as the action table, a one-screen batch
     assert purpose_keys(keys, np.int64(1)).shape == purpose_keys(keys, Purpose.ACTIONS).shape
     executed, _ = corrupt_actions(keys, zeros, zeros, prob=1.0, num_slots=2,

@@ -457,6 +457,10 @@ def test_a_drift_picture_that_cannot_show_concept_2_says_why(monkeypatch, tmp_pa
         assert visual.default_steps(never) == visual.SHEET_STEPS
     latest = stori_jax.Config(drift=stori_jax.ConceptDrift("sudden", 26999, BLACKOUT))
     assert visual.default_steps(latest) == 27000  # T + 100 cut to the episode's steps
+    # gradual drift can switch from step T + 1 on: T = 26999 never does
+    gradual = stori_jax.Config(drift=stori_jax.ConceptDrift("gradual", 26999, BLACKOUT))
+    assert visual.default_steps(gradual) == visual.SHEET_STEPS
+    assert "never, not shown" in visual.drift_showcase("Breakout", gradual, 27000).note
     monkeypatch.setattr(visual, "DRIFT_CANDIDATES", 1)
     monkeypatch.setattr(visual, "DRIFT_SEARCH", 1)
     # seed 0's env 0 plays a 200-odd-step first episode: none reaches step 221 within 230 steps
