@@ -317,6 +317,50 @@ def test_boxing_hiding_a_boxer_hides_its_score(mode, score, colour):
     assert (digit_pixels(all_obs(run)) == 0).all()
 
 
+def test_a_ram_mode_shows_boxings_colour_flip():
+    """STORI_SPEC 6 and 4.2 on a bare emulator beside the env: the flip's colours are written
+    before EVERY frame, the hidden NOOP frame of a RAM mode included (it showed the game's own
+    colours: a flip combined with a RAM mode was invisible whenever the mode rendered). Colour
+    flip at p = 1 toggles every frame; RAM mode 1 (hide the ring) renders every observation."""
+    from stori_jax import RandomEvent
+
+    config = Config(event=RandomEvent(1, 1.0), observation=ObservationMask("ram", 1, 1.0))
+    env = stori_jax.make("Boxing", config=config, obs="raw", num_envs=1, seed=5, frame_skip=1,
+                         num_workers=0)
+    ale = new_ale(get_game("Boxing").rom_id, emulator_seeds(5, 1)[0])
+    actions = ale.getMinimalActionSet()
+    flipped, shown = False, 0
+
+    def colours():  # RAM 1 and 2 as the flip writes them
+        a, b = int(start[1]), int(start[2])
+        return {1: b, 2: a} if flipped else {1: a, 2: b}
+
+    def expected():
+        state = ale.cloneState()
+        for address, value in {**colours(), 3: 214}.items():
+            ale.setRAM(address, value)
+        ale.act(actions[0])
+        screen = ale.getScreenRGB().copy()
+        ale.restoreState(state)
+        return screen
+
+    try:
+        env.reset()
+        ale.reset_game()
+        start = ale.getRAM().copy()
+        for t, a in enumerate(random_actions(len(actions), 40, 1, seed=3)[:, 0]):
+            obs = np.asarray(env.step(np.array([a], np.int32))[0])[0]
+            flipped = not flipped
+            for address, value in colours().items():
+                ale.setRAM(address, value)
+            ale.act(actions[a])
+            np.testing.assert_array_equal(obs, expected(), err_msg=f"step {t}")
+            shown += flipped
+    finally:
+        env.close()
+    assert shown == 20
+
+
 # ---------------------------------------------------------------------------------------------
 # blackout and crop: exactly the spec's regions, in the spec's fill
 # ---------------------------------------------------------------------------------------------

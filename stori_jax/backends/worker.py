@@ -156,10 +156,13 @@ class Emulator:
         if self.spec.pool_screens:
             np.maximum(self.frames[0], self.frames[1], out=self.frames[0])
 
-    def render_ram_obs(self, slot: int) -> bool:
+    def render_ram_obs(self, slot: int, event_active: bool = False) -> bool:
         """Screen ``slot`` <- the next frame under NOOP of a RAM-modified copy of the game.
         False where nothing was rendered: the mode's condition does not hold, or the episode
-        has ended (ALE emulates no frame past an episode's end, so the screen stays true)."""
+        has ended (ALE emulates no frame past an episode's end, so the screen stays true).
+        ``event_active``: an event is on, so the next frame, like every true one, first gets
+        its rule's standing writes (Boxing's colour flip, which the game undoes every frame),
+        then the mode's own."""
         ale = self.ale
         if ale.game_over():  # a game over or the frame cap
             return False
@@ -167,8 +170,13 @@ class Emulator:
         writes = self.ram_obs.writes(self.ram)
         if writes is None:
             return False
+        standing = {}
+        if event_active and self.rule is not None and self.rule.pre_frame is not None:
+            # decide=False: re-apply the standing effect only, no draw (EventRule's contract)
+            standing, _ = self.rule.pre_frame(self.start_ram, dict(self.rule_state), 1.0,
+                                              self.spec.event_prob, False)
         state = ale.cloneState()
-        for address, value in writes.items():
+        for address, value in {**standing, **writes}.items():
             ale.setRAM(address, value)
         ale.act(self.noop)
         ale.getScreenRGB(self.frames[slot])
@@ -229,7 +237,7 @@ class Emulator:
                 # slot 1: the step's last frame (the episode's last, where it ends early)
                 slot = 1 if f == skip - 1 or ends_early else 0
                 ale.getScreenRGB(self.frames[slot])
-                if render_bits & STEP_RENDER_BITS[slot] and self.render_ram_obs(slot):
+                if render_bits & STEP_RENDER_BITS[slot] and self.render_ram_obs(slot, active):
                     rendered |= 1 << slot
             if done:
                 break
