@@ -85,11 +85,9 @@ def apply_masks(frames: jax.Array, apply: jax.Array, *, hidden: np.ndarray | Non
     _check_shape("apply", apply, (b, s))
     if centres is not None:
         _check_shape("centres", centres, (b, s, 2))
-    else:
-        _check_shape("hidden", hidden, (SCREEN_HEIGHT, SCREEN_WIDTH))
-        _check_shape("fill", fill, (SCREEN_HEIGHT, SCREEN_WIDTH, 3))
-    if centres is not None:
         pixel_hidden = torch_mask(centres) & apply[:, :, None, None]
         return jnp.where(pixel_hidden[..., None], jnp.uint8(0), frames)
+    _check_shape("hidden", hidden, (SCREEN_HEIGHT, SCREEN_WIDTH))
+    _check_shape("fill", fill, (SCREEN_HEIGHT, SCREEN_WIDTH, 3))
     pixel_hidden = jnp.asarray(hidden)[None, None] & apply[:, :, None, None]
     return jnp.where(pixel_hidden[..., None], jnp.asarray(fill)[None, None], frames)
