@@ -139,9 +139,12 @@ def episode_step_cap() -> int:
 
 
 def first_concept2_step(drift) -> int:
-    """The 0-indexed episode step from which concept 2 can come: T (sudden, cyclic), T + 1
-    (gradual: P(concept 2) = (k - T) / T is 0 at k = T)."""
-    return drift.period + (drift.schedule == "gradual")
+    """The 0-indexed episode step from which concept 2 can come, as the schedule says: T
+    (sudden, cyclic), or T + 1 where P(concept 2) is still 0 at T (gradual)."""
+    from stori_jax.functional import concept2_probability
+
+    at_t = float(concept2_probability(drift.period, drift.schedule, drift.period))
+    return drift.period if at_t > 0 else drift.period + 1
 
 
 def default_steps(config: Config) -> int:
