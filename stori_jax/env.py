@@ -494,9 +494,11 @@ class Env:
         ``xla()`` again for a new one; ``step`` is the same function, so nothing recompiles).
         Errors in the emulators (a dead worker, an action out of range, a stale handle or one
         of another env) surface as a ``jax.errors.JaxRuntimeError`` whose last line is the
-        error; on an accelerator, when the step's results are read.  After an error inside a
-        scan, no handle is current: ``reset()``.  ``step`` holds the env weakly (JAX's caches
-        keep it forever): keep the env referenced while you step it, or its workers close."""
+        error; on an accelerator, when the step's results are read (a handle of an env of
+        another size or observation is refused sooner, with a ValueError while tracing).
+        After an error inside a scan, no handle is current: ``reset()``.  ``step`` holds the
+        env weakly (JAX's caches keep it forever): keep the env referenced while you step it,
+        or its workers close."""
         from stori_jax import xla
 
         self._check_open()

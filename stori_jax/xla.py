@@ -26,7 +26,7 @@ from jax.experimental import io_callback
 
 from stori_jax.backends.layout import SCREEN, buffer_specs
 from stori_jax.checks import check_actions
-from stori_jax.core import EnvState, WorkerOutputs, before_step, finish_step
+from stori_jax.core import EnvState, WorkerOutputs, before_step, finish_step, initial_state
 from stori_jax.functional.preprocess import frames_shape
 
 
@@ -78,11 +78,29 @@ def check_traced_actions(actions, num_envs: int, num_actions: int) -> jax.Array:
     return jnp.asarray(actions, jnp.int32)
 
 
+def check_handle_shapes(plan, handle: XlaHandle) -> None:
+    """A handle of another env whose batch or observation differs fails here, while tracing,
+    not deep inside the traced step (same-shaped ones are refused by the host callback)."""
+    expected = jax.eval_shape(lambda: initial_handle(initial_state(plan, 0),
+                                                     jnp.zeros((plan.num_envs,), bool), 0))
+    for name, want, got in zip(XlaHandle._fields, expected, handle):
+        want_leaves, got_leaves = jax.tree.leaves(want), jax.tree.leaves(got)
+        same = len(want_leaves) == len(got_leaves) and all(
+            jnp.shape(g) == w.shape and jnp.result_type(g) == w.dtype
+            for w, g in zip(want_leaves, got_leaves))
+        if not same:
+            shapes = lambda leaves: [f"{jnp.result_type(x)}{list(jnp.shape(x))}" for x in leaves]
+            raise ValueError(f"handle.{name} has {shapes(got_leaves)}, this env's has "
+                             f"{shapes(want_leaves)}: the handle comes from another env (another "
+                             "num_envs or obs); step the latest handle of this env's xla()")
+
+
 def xla_step(plan, emulate, handle: XlaHandle, actions):
     """One agent step of every env, traceable: ``emulate`` is the env's host callback."""
     if not isinstance(handle, XlaHandle):
         raise ValueError(f"handle must be the XlaHandle from env.xla() or the last step, got "
                          f"{type(handle).__name__}")
+    check_handle_shapes(plan, handle)
     actions = check_traced_actions(actions, plan.num_envs, plan.num_actions)
     state, draws = before_step(plan, handle.state, actions)
     out = io_callback(emulate, output_shapes(plan), handle.epoch, handle.steps, state.key,

@@ -135,6 +135,24 @@ def test_a_handle_steps_once(caplog):
         step(handle, jnp.zeros(2, jnp.int32))
 
 
+def test_a_handle_of_an_env_of_another_size_or_observation_is_refused_while_tracing():
+    with make("Breakout") as env, make("Breakout", num_envs=3) as wider, \
+            make("Breakout", obs="atari84") as stacked:
+        handles = {}
+        for name, e in (("env", env), ("wider", wider), ("stacked", stacked)):
+            e.reset()
+            handles[name] = e.xla()
+        handle, step = handles["env"]
+        for other in ("wider", "stacked"):
+            other_handle, other_step = handles[other]
+            with pytest.raises(ValueError, match=r"handle.state has .* comes from another env"):
+                step(other_handle, jnp.zeros(2, jnp.int32))
+            with pytest.raises(ValueError, match=r"handle.state has .* comes from another env"):
+                other_step(handle, jnp.zeros(other_handle.reset_pending.shape, jnp.int32))
+        step(handle, jnp.zeros(2, jnp.int32))  # refused before anything ran: each still steps
+        handles["wider"][1](handles["wider"][0], jnp.zeros(3, jnp.int32))
+
+
 def test_xla_misuse_is_a_clear_error():
     with make("Breakout") as env:
         with pytest.raises(RuntimeError, match="settled env: reset"):
