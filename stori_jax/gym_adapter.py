@@ -97,8 +97,9 @@ class _Owner:
         if registered is not None and not _names(game, preset, registered):
             raise ValueError(f"this id is {env_id(*registered)}: it fixes game and preset, got "
                              f"game={game!r} preset={preset!r}; use that preset's own id")
-        if "max_episode_steps" in make_kwargs:  # gymnasium's TimeLimit (make_vec's default mode)
-            raise ValueError("max_episode_steps: a stori_jax vector env caps episodes in emulator "
+        if "max_episode_steps" in make_kwargs:  # make_vec's default mode, or the classes
+            # (gymnasium.make takes it itself, for its TimeLimit wrapper)
+            raise ValueError("max_episode_steps: stori_jax envs cap episodes in emulator "
                              "frames: pass max_episode_frames (steps x frame_skip), got "
                              f"max_episode_steps={make_kwargs['max_episode_steps']!r}")
         if make_kwargs.pop("render_mode", None) is not None:
@@ -116,14 +117,24 @@ class _Owner:
         self._seed = 0 if seed is None else check_int("seed", seed, 0, MAX_SEED)
         self._env = self._make(self._seed)
         self._fresh = True  # no reset yet: the env is exactly as made from self._seed
+        self._gym_reset_done = False  # gymnasium's reset not yet called (np_random unseeded)
         self.closed = False
 
     def _check_open(self):
-        if self.closed:
-            from stori_jax.backends.subproc import EnvClosedError
+        from stori_jax.backends.subproc import EnvClosedError
 
+        if self.closed:
             raise EnvClosedError("this environment is closed; make a new one with "
                                  "gymnasium.make or gymnasium.make_vec")
+
+    def _check_steppable(self):
+        self._check_open()
+        if self._env.closed:  # closed by a worker's death (only close() closes it otherwise)
+            from stori_jax.backends.subproc import EnvClosedError
+
+            raise EnvClosedError("a worker of this environment died (the step that said so "
+                                 "raised WorkerError); reset() makes the env again from its "
+                                 "seed")
 
     def _reset_env(self, seed):
         """Reset the env: an explicit seed restarts everything (emulators and key) from that
@@ -146,7 +157,7 @@ class _Owner:
         """The seed for gymnasium's own ``reset`` (np_random, np_random_seed), after
         ``_reset_env``: the int the env plays, also on a first reset without a seed (gymnasium
         would draw a random one); None on a later one (np_random goes on)."""
-        first = getattr(self, "_np_random", None) is None
+        first, self._gym_reset_done = not self._gym_reset_done, True
         return self._seed if seed is not None or first else None
 
     @staticmethod
@@ -185,7 +196,7 @@ class StoriGymEnv(_Owner, gym.Env):
         return _numpy(obs[0]), _first_env_info(info)
 
     def step(self, action):
-        self._check_open()
+        self._check_steppable()
         a = np.asarray(action)
         if a.shape != () or not np.issubdtype(a.dtype, np.integer) or not 0 <= a < self.action_space.n:
             raise ValueError(f"action must be one int in [0, {self.action_space.n - 1}], "
@@ -216,7 +227,7 @@ class StoriVectorEnv(_Owner, VectorEnv):
         return _numpy(obs), _vector_info(info, self.num_envs)
 
     def step(self, actions):
-        self._check_open()
+        self._check_steppable()
         obs, reward, terminated, truncated, info = self._env.step(actions)
         return (_numpy(obs), _numpy(reward), _numpy(terminated), _numpy(truncated),
                 _vector_info(info, self.num_envs))

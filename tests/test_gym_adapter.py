@@ -6,7 +6,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import stori_jax
-from stori_jax.gym_adapter import env_id
+from stori_jax.gym_adapter import StoriGymEnv, env_id
 
 
 def test_every_preset_is_registered():
@@ -117,6 +117,8 @@ def test_a_spec_saved_as_json_makes_the_env_again_and_max_episode_steps_is_named
     with pytest.raises(ValueError, match=r"max_episode_steps: .* pass max_episode_frames "
                                          r"\(steps x frame_skip\), got max_episode_steps=100"):
         gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, max_episode_steps=100)
+    with pytest.raises(ValueError, match=r"max_episode_steps: stori_jax envs cap episodes"):
+        StoriGymEnv("Breakout", "3.1", max_episode_steps=100)  # a single env is not a vector
 
 
 @pytest.mark.parametrize("kwargs,pattern", [
@@ -260,7 +262,8 @@ def test_np_random_seed_is_the_seed_the_env_plays(vector):
         env = (gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, obs="ram", **made_with)
                if vector else gym.make("stori_jax/Breakout-3.1-v0", obs="ram", **made_with))
         try:
-            env.reset()
+            env.np_random  # read before the first reset (a wrapper may): gymnasium seeds it
+            env.reset()    # at random, and the first reset still seeds it with the env's seed
             assert env.np_random_seed == played
             env.reset()
             assert env.np_random_seed == played
@@ -359,6 +362,10 @@ def test_reset_after_a_worker_died_makes_the_env_again_from_its_seed():
         with pytest.raises(stori_jax.WorkerError, match="died"):
             for _ in range(50):  # the death is noticed at the next command
                 env.step(0)
+        # a step after it says what to do here (not stori_jax.make's advice)
+        with pytest.raises(stori_jax.EnvClosedError, match=r"worker of this environment died.*"
+                                                           r"reset\(\) makes the env again"):
+            env.step(0)
         obs, _ = env.reset()
         np.testing.assert_array_equal(obs, fresh.reset()[0])
         assert env.step(1)[0].shape == obs.shape
