@@ -124,6 +124,13 @@ class PPOConfig:
         if self.action_head not in ACTION_HEADS:
             raise ValueError(f"action_head must be one of {list(ACTION_HEADS)}, "
                              f"got {self.action_head!r}")
+        updates = self.num_iterations * updates_per_iteration(self)
+        if self.anneal_lr and updates > np.iinfo(np.int32).max:  # the schedule counts in int32
+            raise ValueError(f"total_steps is too large for anneal_lr: {self.num_iterations} "
+                             f"iterations x {updates_per_iteration(self)} updates each = "
+                             f"{updates} optimizer updates, the learning-rate schedule counts "
+                             f"at most {np.iinfo(np.int32).max}; train fewer steps (or set "
+                             "anneal_lr=false)")
         num_actions = stori_jax.get_game(self.game).num_actions
         if self.action_head == "factored" and num_actions != len(FULL_ACTION_SET):
             raise ValueError(f"action_head='factored' needs a game that plays ALE's full "
@@ -570,6 +577,21 @@ def _software_parts(ckpt: dict, start: int, made_with: dict, path: Path) -> list
     return parts + [dict(from_iteration=start, software=made_with)]
 
 
+def check_no_finished_run(out: Path) -> None:
+    """A fresh run is not trained over a finished one (its summary or an evaluation there)
+    whose checkpoint is missing (checkpoints are not committed): it would start again over
+    its files and leave the old evaluations beside the new run.  A run stopped before its
+    first checkpoint (no summary yet) is simply started again."""
+    finished = [path.name for path in [out / "summary.json", *sorted(out.glob("eval-*.json"))]
+                if path.exists()]
+    if finished:
+        raise ValueError(f"{out} holds a finished run ({', '.join(finished)}) without the "
+                         "checkpoint.pkl to resume it from (checkpoints are not committed): "
+                         "training there would start again over its files and leave its "
+                         "evaluations beside the new run; train into another directory "
+                         "(stori-jax train --out DIR)")
+
+
 def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool = True,
           stop_after: int | None = None) -> dict:
     """Train PPO; write ``out``/config.json, log.csv, episodes.csv, checkpoint.pkl and
@@ -590,6 +612,8 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
     ckpt_path, log_path, ep_path = out / "checkpoint.pkl", out / "log.csv", out / "episodes.csv"
     last = config.num_iterations if stop_after is None else min(stop_after,
                                                                 config.num_iterations)
+    if not resume:
+        check_no_finished_run(out)
     ckpt = _checked_checkpoint(config, ckpt_path, stop_after) if resume else None
     if ckpt is not None and ckpt["iteration"] == last:  # nothing to train
         parts = _recorded_parts(ckpt)

@@ -155,6 +155,17 @@ def test_ppo_config_fields_are_checked(field, value, message):
         tiny(**{field: value})
 
 
+def test_a_learning_rate_schedule_longer_than_int32_is_refused_only_when_annealed():
+    """optax's schedule counts updates in int32: beyond it the first update was an
+    OverflowError from inside jit; without annealing nothing counts that far."""
+    updates = ppo.updates_per_iteration(tiny())
+    fits = (2**31 - 1) // updates * tiny().batch_size  # the most agent steps that fit
+    assert tiny(total_steps=fits).num_iterations * updates <= 2**31 - 1
+    with pytest.raises(ValueError, match="total_steps is too large for anneal_lr"):
+        tiny(total_steps=fits + 1)
+    assert tiny(total_steps=fits + 1, anneal_lr=False).total_steps == fits + 1
+
+
 def test_ppo_config_spells_the_game_one_way():
     assert tiny(game="BREAKOUT").game == tiny(game="breakout").game == "Breakout"
 
@@ -1423,6 +1434,8 @@ def test_the_curves_legend_names_every_line_of_every_panel_in_one_colour_per_see
     (["train", "ppo", "--game", "Pong"], "game must be one of the STORI games ['Breakout', "),
     (["eval", "--random", "--game", "pong", "--preset", "3.1"], "the baselines play the paper"),
     (["train", "ppo", "--game", "Breakout", "--preset", "4"], "preset"),
+    (["train", "ppo", "--game", "Breakout", "--steps", "1000000000000"],  # optax: OverflowError
+     "--steps is too large for anneal_lr: 976562500 iterations x 16 updates each"),
     (["train", "ppo", "--game", "Breakout", "--set", "lr"], "FIELD=VALUE"),
     (["train", "ppo", "--game", "Breakout", "--set", "nope=1"],
      "unknown PPO hyperparameter 'nope'; --set takes ['action_head', "),
@@ -1457,6 +1470,32 @@ def test_run_evidence_names_bad_runs_and_seeds(argv, match, monkeypatch, capsys)
     with pytest.raises(SystemExit) as exit_info:
         run_evidence.main()
     assert exit_info.value.code == 2 and match in capsys.readouterr().err
+
+
+def test_a_finished_run_without_its_checkpoint_is_not_trained_over(uninterrupted, tmp_path,
+                                                                     capsys):
+    """Committed runs have no checkpoint.pkl: a fresh run in their directory would start again
+    over their files and leave their evaluation beside the new run's curve; a run stopped
+    before its first checkpoint (no summary yet) is simply started again."""
+    import shutil
+
+    full, _ = uninterrupted
+    committed = tmp_path / "committed"
+    shutil.copytree(full, committed, ignore=shutil.ignore_patterns("checkpoint.pkl"))
+    (committed / "eval-sampled.json").write_text("{}")
+    before = {p.name: p.read_bytes() for p in committed.iterdir()}
+    assert main(["train", "ppo", "--game", "Breakout", "--out", str(committed), "--quiet",
+                 "--eval-episodes", "1", "--force"]) == 2
+    assert ("holds a finished run (summary.json, eval-sampled.json) without the checkpoint.pkl"
+            in capsys.readouterr().err)
+    (committed / "summary.json").unlink()
+    with pytest.raises(ValueError, match=r"holds a finished run \(eval-sampled.json\)"):
+        ppo.train(tiny(), committed, progress=False, stop_after=1)
+    assert {p.name: p.read_bytes() for p in committed.iterdir()} == {
+        name: data for name, data in before.items() if name != "summary.json"}
+    (committed / "eval-sampled.json").unlink()  # now as a run stopped before its checkpoint
+    ppo.train(tiny(), committed, progress=False, stop_after=1)
+    assert (committed / "checkpoint.pkl").exists()
 
 
 def test_cli_train_refuses_to_overwrite_and_evaluates(uninterrupted, tmp_path, capsys):
