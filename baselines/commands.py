@@ -187,6 +187,18 @@ def describe_result(result: dict) -> str:
             f"episode{'s' * (episodes != 1)}, eval seed {result['eval_seed']})")
 
 
+def game_flag(name: str) -> str:
+    """:func:`stori_game` of --game's value, its errors naming the flag."""
+    from baselines.evaluate import stori_game
+
+    try:
+        return stori_game(name)
+    except ValueError as error:
+        message = str(error)
+        raise ValueError("--" + message if message.startswith("game ")
+                         else f"--game: {message}") from None
+
+
 def cmd_eval(args) -> int:
     import stori_jax
     from baselines.evaluate import (EVAL_SEED_OFFSET, evaluate, result_path, stori_game,
@@ -194,6 +206,7 @@ def cmd_eval(args) -> int:
     from baselines.ppo import load_checkpoint
     from stori_jax.checks import MAX_INT32, MAX_SEED, check_int
     from stori_jax.cli import check_out
+    from stori_jax.env import FRAME_SKIP, check_memory
     from stori_jax.presets import canonical_preset
 
     if args.random == (args.checkpoint is not None):
@@ -206,19 +219,21 @@ def cmd_eval(args) -> int:
                                            MAX_INT32)):
         if value is not None:
             check_int(flag, value, minimum, maximum)
+    envs = min(args.num_envs, args.episodes)  # evaluate() steps no more envs than episodes
+    check_memory(envs, FRAME_SKIP, flag="--num-envs" if envs == args.num_envs else "--episodes")
     if args.random:
         if args.game is None or args.preset is None:
             raise ValueError("--random needs --game and --preset")
         if args.policy is not None:
             raise ValueError("--policy applies to checkpoints only (--random plays the random "
                              "policy)")
-        game = stori_game(args.game)  # one spelling per game (and preset) in the run folders
+        game = game_flag(args.game)  # one spelling per game (and preset) in the run folders
         preset, seed, policy = canonical_preset(game, args.preset), args.seed or 0, "random"
         out = args.out or run_dir(DEFAULT_ROOT, game, preset, "random", seed)
         checkpoint = None
     else:
         config = load_checkpoint(args.checkpoint)["config"]
-        game = args.game if args.game is None else stori_game(args.game)
+        game = args.game if args.game is None else game_flag(args.game)
         # the training seed labels the result (and the table's seed column): it is the checkpoint's
         for flag, value, trained in (("--game", game, stori_game(config["game"])),
                                      ("--preset", args.preset, config["preset"]),

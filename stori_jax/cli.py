@@ -138,21 +138,22 @@ def _cmd_suite(args) -> int:
     for name, value in (("--episodes", args.episodes), ("--num-envs", args.num_envs),
                         ("--max-steps", args.max_steps)):
         check_int(name, value, 1)
-    check_int("--seed", args.seed, 0, MAX_SEED)
-    try:  # before any preset runs, in the command's words
-        check_memory(args.num_envs, FRAME_SKIP)
-    except ValueError as error:
-        raise ValueError(str(error).replace("num_envs=", "--num-envs ").replace(
-            "a smaller num_envs or frame_skip", "a smaller --num-envs")) from None
+    if args.seed is not None:
+        check_int("--seed", args.seed, 0, MAX_SEED)
+    check_memory(args.num_envs, FRAME_SKIP, flag="--num-envs")  # before any preset runs
     if args.out is not None:
         check_out("--out", args.out, directory=True)
-    games = args.games
-    if args.checkpoint is not None and not games:  # a checkpoint plays its own game
+    games, seed = args.games, 0 if args.seed is None else args.seed
+    if args.checkpoint is not None:  # a checkpoint plays its own game, on eval's seed
+        from baselines.evaluate import EVAL_SEED_OFFSET
         from baselines.ppo import load_checkpoint
 
-        games = [load_checkpoint(args.checkpoint)["config"]["game"]]
+        trained = load_checkpoint(args.checkpoint)["config"]
+        games = games or [trained["game"]]
+        if args.seed is None:
+            seed = trained["seed"] + EVAL_SEED_OFFSET
     out = run_suite(selected_presets(games, args.presets), episodes=args.episodes,
-                    num_envs=args.num_envs, max_steps=args.max_steps, seed=args.seed,
+                    num_envs=args.num_envs, max_steps=args.max_steps, seed=seed,
                     out=args.out, gallery=not args.no_gallery, progress=not args.quiet,
                     checkpoint=args.checkpoint)
     print((out / "table.md").read_text())
@@ -263,10 +264,13 @@ def build_parser() -> argparse.ArgumentParser:
                        help="envs stepped together (default 8)")
     suite.add_argument("--max-steps", type=int, default=2500,
                        help="agent steps per preset at most, if episodes are long (default 2500)")
-    suite.add_argument("--seed", type=int, default=0, help=SEED_HELP)
+    suite.add_argument("--seed", type=int, default=None,
+                       help="environment seed (default 0; with --checkpoint the eval seed "
+                            "`stori-jax eval` gives it: never one of its training envs' seeds)")
     suite.add_argument("--checkpoint", type=Path, default=None,
                        help="play a trained PPO checkpoint's policy (sampled) instead of the "
-                            "random one; it plays its own game's presets")
+                            "random one; it plays its own game's presets (the gallery shows "
+                            "random play)")
     suite.add_argument("--out", type=Path, default=None,
                        help="default results/suite-<date>; an earlier suite run's files there "
                             "are replaced")

@@ -152,7 +152,9 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
               out: Path | None, gallery: bool, progress: bool = True,
               checkpoint: Path | None = None) -> Path:
     """Run ``presets`` [(game, name)] with the random policy, or the PPO ``checkpoint``'s
-    (which plays its own game only: every preset must be of that game)."""
+    (which plays its own game only: every preset must be of that game, and ``seed`` must not
+    be one of its training envs' seeds).  The gallery's contact sheets show what each preset
+    perturbs, under random play either way."""
     from tqdm import tqdm
 
     import stori_jax
@@ -162,6 +164,7 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
     out = Path(out) if out else Path("results") / f"suite-{datetime.date.today().isoformat()}"
     policy = agent = None
     if checkpoint is not None:
+        from baselines.evaluate import EVAL_SEED_OFFSET, check_eval_seed
         from baselines.ppo import load_policy
 
         config, policy = load_policy(checkpoint, "sampled")
@@ -170,6 +173,8 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
         if others:
             raise ValueError(f"--checkpoint {checkpoint} plays {trained_on} only; choose its "
                              f"presets with --games {trained_on} (asked for {others})")
+        check_eval_seed(config.seed, seed, "choose another --seed (by default the training "
+                        f"seed + {EVAL_SEED_OFFSET})")
         agent = str(checkpoint)
     rows, written = [], [out / "results.json", out / "table.md"]
     # the sheets wait in a hidden folder until the run has finished: an interrupted run leaves
@@ -199,7 +204,7 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
     text = (f"Agent: {agent or 'uniformly random policy'}\n\n" + table(rows)
             + short_rows_note(rows, episodes, num_envs, max_steps))
     if gallery:
-        text += "\nGallery (3.1 twin beside each preset): " + ", ".join(
+        text += "\nGallery (random play, 3.1 twin beside each preset): " + ", ".join(
             f"[{g} {n}]({sheet_path(out, g, n).relative_to(out)})" for g, n in presets) + "\n"
     (out / "table.md").write_text(text)
     stale = remove_stale_outputs(out, written)

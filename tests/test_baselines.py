@@ -1433,6 +1433,11 @@ def test_the_curves_legend_names_every_line_of_every_panel_in_one_colour_per_see
     (["train", "ppo", "--game", "Pong2"], "unknown game"),
     (["train", "ppo", "--game", "Pong"], "game must be one of the STORI games ['Breakout', "),
     (["eval", "--random", "--game", "pong", "--preset", "3.1"], "the baselines play the paper"),
+    (["eval", "--random", "--game", "Pong", "--preset", "3.1"], "--game must be one of the STORI"),
+    (["eval", "--random", "--game", "Pong2", "--preset", "3.1"], "--game: unknown game 'Pong2'"),
+    (["eval", "--random", "--game", "Breakout", "--preset", "3.1", "--num-envs", "1000000000",
+      "--episodes", "100000000"],  # one env per episode: --episodes is the batch's size
+     "--episodes 100000000 with frame_skip=4 needs"),
     (["train", "ppo", "--game", "Breakout", "--preset", "4"], "preset"),
     (["train", "ppo", "--game", "Breakout", "--steps", "1000000000000"],  # optax: OverflowError
      "--steps is too large for anneal_lr: 976562500 iterations x 16 updates each"),
@@ -1578,10 +1583,17 @@ def test_suite_plays_a_checkpoint_on_its_games_presets(uninterrupted, tmp_path, 
     assert [(r["game"], r["preset"]) for r in results["rows"]] == [("Breakout", "1"),
                                                                    ("Breakout", "3.1")]
     assert all(r["agent_steps"] == 20 for r in results["rows"])
+    # on eval's seed, not on envs that replay training's draws (seed 0 trained on envs 0, 1)
+    assert results["seed"] == 10_000
     capsys.readouterr()
     assert main(["suite", "--checkpoint", str(checkpoint), "--games", "Boxing", "--quiet",
                  "--no-gallery", "--out", str(tmp_path)]) == 2
     assert "plays Breakout only" in capsys.readouterr().err
+    assert main(["suite", "--checkpoint", str(checkpoint), "--seed", "1", "--quiet",
+                 "--no-gallery", "--out", str(tmp_path)]) == 2
+    assert ("eval seed 1 is one of the training envs' seeds [0, 1] (training seed 0): the "
+            "evaluation would replay training's episodes; choose another --seed (by default "
+            "the training seed + 10000)") in capsys.readouterr().err
 
 
 def test_cli_eval_passes_its_seeds_envs_and_default_policy_on(uninterrupted, tmp_path):
