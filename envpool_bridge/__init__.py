@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from stori_jax.backends.interrupts import interrupts_deferred
 from stori_jax.backends.layout import SCREEN, buffer_specs
 from stori_jax.backends.subproc import EnvClosedError
 
@@ -109,44 +110,68 @@ class EnvpoolBackend:
         self.views["frames"] = np.zeros((b, SCREEN[2]) + SCREEN[:2], np.uint8)
         self._running_return = np.zeros(b, np.float64)
         self._running_length = np.zeros(b, np.int64)
-        self._pending = None
+        self._pending = None  # the command the pool has and whose result is not yet taken
         self._closed = False
 
     @property
     def closed(self) -> bool:
         return self._closed
 
+    @property
+    def pending(self) -> bool:
+        """A command was sent and its result not yet taken."""
+        return self._pending is not None
+
     def _check(self):
         if self._closed:
             raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
+
+    # Each command is sent, and each result taken, with Ctrl-C held over the call and its
+    # record (stori_jax.backends.interrupts): the pool's wait is C++ and cannot be interrupted
+    # anyway, and a KeyboardInterrupt between a call and its record left a reset queued behind
+    # the env's back (its next reset drove the emulators twice at once: a segfault) or a
+    # result taken but not recorded (every later step one command behind).
 
     def send_reset(self, seed: int | None = None) -> None:
         """Reset every env; with ``seed``, on a new pool of that seed (envpool cannot reseed
         one: a pool of the same seed starts its emulators alike)."""
         self._check()
-        if seed is not None:
-            pool, self.pool = self.pool, self._make_pool(seed)
-            pool.close()
-        self._pending = "reset"
+        if self._pending is not None:
+            raise RuntimeError("a command is in flight: call recv() before sending again")
+        with interrupts_deferred():
+            if seed is not None:
+                pool, self.pool = self.pool, self._make_pool(seed)
+                pool.close()
+            self.pool.async_reset()
+            self._pending = "reset"
 
     def send_step(self) -> None:
         self._check()
-        self.pool.send(self.views["executed"][:, 0].astype(np.int32))
-        self._pending = "step"
+        if self._pending is not None:
+            raise RuntimeError("a command is in flight: call recv() before sending again")
+        actions = self.views["executed"][:, 0].astype(np.int32)
+        with interrupts_deferred():
+            self.pool.send(actions)
+            self._pending = "step"
 
     def recv(self) -> dict:
         self._check()
+        if self._pending is None:
+            raise RuntimeError("nothing in flight: call send_step() or send_reset() first")
+        with interrupts_deferred():
+            return self._take(self._pending)
+
+    def _take(self, command: str) -> dict:
+        """The pool's result of ``command``, in the views."""
         v = self.views
-        if self._pending == "reset":
-            obs, info = self.pool.reset()
+        if command == "reset":
+            obs, info = self.pool.recv(reset=True, return_info=True)
             reward = np.zeros(self.num_envs, np.float32)
             terminated = truncated = np.zeros(self.num_envs, bool)
             reset_step = np.ones(self.num_envs, bool)
-        elif self._pending == "step":
+        else:
             obs, reward, terminated, truncated, info = self.pool.recv()
             reset_step = v["reset_first"].astype(bool)  # envpool resets these itself
-        else:
-            raise RuntimeError("nothing in flight: call send_step() or send_reset() first")
         self._pending = None
         v["frames"][...] = obs
         v["ram"][...] = info["ram"]

@@ -259,3 +259,50 @@ def test_the_pool_gets_the_options_the_bridge_documents():
         episodic_life=False, reward_clip=False, use_fire_reset=False,
         repeat_action_probability=0.0, full_action_space=False)
     assert reseeded == envpool_seed(7)
+
+
+
+@pytest.mark.parametrize("call", ["_reset", "_send", "_recv"])
+def test_a_ctrl_c_as_a_pool_call_returns_leaves_a_run_that_goes_on_as_asked(call, monkeypatch):
+    """A Ctrl-C lands where Python next runs: right after one of the pool's C++ calls.  After
+    _reset (inside envpool's reset(), before its recv) it left a reset queued behind the env's
+    back, and the env's next reset drove the emulators twice at once (a segfault, or a run
+    one command behind).  Now the interrupt comes after the backend's record of the call: the
+    env goes on as one whose call was interrupted (recv() for a step in flight, reset()
+    otherwise), and its run is that of a twin stepped the same way without interruption."""
+    import os
+    import signal
+
+    actions = np.random.default_rng(1).integers(0, 4, (12, 3))
+    with stori_jax.make("Breakout", "1", num_envs=3, seed=0, obs="raw", **EP) as env, \
+            stori_jax.make("Breakout", "1", num_envs=3, seed=0, obs="raw", **EP) as twin:
+        env.reset(), twin.reset()
+        for a in actions[:4]:
+            env.step(a), twin.step(a)
+        pool, fired = env.backend.pool, []
+        original = getattr(pool, call)
+
+        def interrupted(*args, **kwargs):
+            result = original(*args, **kwargs)
+            if not fired:
+                fired.append(True)
+                os.kill(os.getpid(), signal.SIGINT)
+            return result
+
+        monkeypatch.setattr(pool, call, interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            env.reset() if call == "_reset" else env.step(actions[4])
+        assert fired
+        if env._in_flight is not None:  # the step stayed in flight: recv() takes it
+            got, expected = env.recv(), twin.step(actions[4])
+        else:  # the env says it needs reset(): a run reset at this point
+            with pytest.raises(RuntimeError, match="reset"):
+                env.step(actions[4])
+            got, expected = env.reset(), twin.reset()
+        np.testing.assert_array_equal(np.asarray(got[0]), np.asarray(expected[0]))
+        for a in actions[5:]:
+            got, expected = env.step(a), twin.step(a)
+            for x, y in zip(got[:4], expected[:4]):
+                np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+            np.testing.assert_array_equal(np.asarray(got[4]["ram"]),
+                                          np.asarray(expected[4]["ram"]))
