@@ -637,6 +637,40 @@ def test_workers_outlive_the_thread_that_made_the_env():
         env.close()
 
 
+def test_envs_started_in_two_threads_at_once_leave_main_as_it_was(monkeypatch):
+    """Starting workers hides __main__'s __file__ and __spec__ and puts them back.  Two threads
+    doing it at once: the second saved the first's hidden values and put those back last, so
+    __spec__ stayed None for good (a user's own spawned processes then failed).  They take
+    turns now: the second starts its workers once the first has put everything back."""
+    from stori_jax.backends.subproc import _main_module_not_reimported
+
+    main = sys.modules["__main__"]  # as a script run with python -m has them (xdist's lacks)
+    monkeypatch.setattr(main, "__file__", "/somewhere/script.py", raising=False)
+    monkeypatch.setattr(main, "__spec__", object(), raising=False)
+    before = {k: getattr(main, k) for k in ("__file__", "__spec__")}
+    first_inside, first_may_leave, first_left = (threading.Event() for _ in range(3))
+
+    def first():
+        with _main_module_not_reimported():
+            first_inside.set()
+            first_may_leave.wait(10)
+        first_left.set()
+
+    def second():
+        with _main_module_not_reimported():
+            first_left.wait(10)  # (without turns: inside both at once, and leaving last)
+
+    threads = [threading.Thread(target=first), threading.Thread(target=second)]
+    threads[0].start()
+    first_inside.wait(10)
+    threads[1].start()
+    time.sleep(0.2)  # the second is in, or waiting for its turn
+    first_may_leave.set()
+    for thread in threads:
+        thread.join(10)
+    assert {k: getattr(main, k, "missing") for k in ("__file__", "__spec__")} == before
+
+
 @contextlib.contextmanager
 def interrupting(owner, method: str):
     """``owner.method`` raises KeyboardInterrupt (a Ctrl-C landing there) inside the block."""

@@ -15,6 +15,7 @@ import pickle
 import shutil
 import sys
 import tempfile
+import threading
 import time
 import weakref
 from multiprocessing.connection import wait
@@ -64,22 +65,28 @@ def split_batch(num_envs: int, num_workers: int) -> list[tuple[int, int]]:
     return bounds
 
 
+_MAIN_MODULE_HIDDEN = threading.RLock()  # one thread at a time hides and restores it
+
+
 @contextlib.contextmanager
 def _main_module_not_reimported():
     """Spawned workers need nothing from ``__main__``; hide its path while starting them so
-    that a user's unguarded script (no ``if __name__ == "__main__"``) is not re-run in them."""
-    main = sys.modules.get("__main__")
-    saved = {k: getattr(main, k) for k in ("__file__", "__spec__") if hasattr(main, k)}
-    try:
-        for k in saved:
-            if k == "__file__":
-                delattr(main, k)
-            else:
-                setattr(main, k, None)
-        yield
-    finally:
-        for k, v in saved.items():
-            setattr(main, k, v)
+    that a user's unguarded script (no ``if __name__ == "__main__"``) is not re-run in them.
+    Envs made in two threads at once take turns: otherwise the second saved the first's
+    ``None`` and put it back for good (the user's own spawned processes then failed)."""
+    with _MAIN_MODULE_HIDDEN:
+        main = sys.modules.get("__main__")
+        saved = {k: getattr(main, k) for k in ("__file__", "__spec__") if hasattr(main, k)}
+        try:
+            for k in saved:
+                if k == "__file__":
+                    delattr(main, k)
+                else:
+                    setattr(main, k, None)
+            yield
+        finally:
+            for k, v in saved.items():
+                setattr(main, k, v)
 
 
 def _remove_folders(folders: list) -> None:
