@@ -375,8 +375,11 @@ class Env:
         out = self._wait(deadline, timeout, late)
         everyone = np.ones(self.num_envs, bool)
         (obs, _, _, _, info), _ = self._finish(state, draws, out, everyone)
-        self._needs_reset = self._reseed_due = False
+        # the record last, one fact per statement: a Ctrl-C between them leaves an env that
+        # still needs reset(), never one that steps with an earlier step's resets due
         self._reset_pending[:] = False
+        self._reseed_due = False
+        self._needs_reset = False
         return obs, info
 
     def _deadline(self, timeout, call: str) -> float | None:
@@ -410,6 +413,7 @@ class Env:
     def send(self, actions) -> None:
         """Start one step of every env with ``actions`` (B,) ints."""
         self._check_open()
+        self._drop_unrecorded_step()
         if self._needs_reset:
             raise RuntimeError("call reset() first (before the first step, and after an "
                                "interrupted step or reset)")
@@ -428,6 +432,13 @@ class Env:
         with interrupts_deferred():  # the workers have the step, and this env knows it
             self.backend.send_step()
             self._in_flight = (state, draws, self._reset_pending.copy())
+
+    def _drop_unrecorded_step(self) -> None:
+        """A step in flight whose outputs the backend has handed over, though this env never
+        recorded them (a Ctrl-C landed between the two): the emulators are ahead of this
+        env's state, so it needs reset()."""
+        if self._in_flight is not None and not getattr(self.backend, "pending", True):
+            self._in_flight, self._needs_reset = None, True
 
     def _refuse_if_workers_busy(self) -> None:
         """This env has nothing in flight: neither may its workers.  An interrupted snapshot
@@ -449,6 +460,7 @@ class Env:
         most ``MAX_TIMEOUT_S`` (a million seconds)."""
         self._check_open()
         deadline = self._deadline(timeout, "recv")
+        self._drop_unrecorded_step()
         if self._in_flight is None:
             if not self._needs_reset:
                 self._refuse_if_workers_busy()
@@ -469,8 +481,8 @@ class Env:
             if not getattr(self.backend, "pending", False):
                 self._in_flight, self._needs_reset = None, True
             raise
+        self._reset_pending = pending  # before the step leaves the record (see above)
         self._in_flight = None
-        self._reset_pending = pending
         return result
 
     def step(self, actions, timeout: float | None = None):
@@ -626,7 +638,8 @@ class Env:
         self._state = EnvState(*jax.tree.map(jnp.asarray, tuple(snapshot["state"])))
         self.seed = snapshot["seed"]  # emulators and key are that seed's run now
         self._reset_pending = np.array(snapshot["reset_pending"], bool)
-        self._needs_reset = self._reseed_due = False
+        self._reseed_due = False
+        self._needs_reset = False  # last: until here, an interruption leaves it needing reset
 
     # -- internals ------------------------------------------------------------------------------
 

@@ -708,6 +708,61 @@ def test_an_interrupt_after_the_emulators_finished_requires_a_reset():
         env.close()
 
 
+@contextlib.contextmanager
+def interrupted_at(function, statement: str):
+    """A KeyboardInterrupt (a Ctrl-C landing there) just before ``function`` runs its line that
+    reads ``statement``, once, inside the block."""
+    import inspect
+
+    lines, first = inspect.getsourcelines(function)
+    at = [first + i for i, line in enumerate(lines) if line.strip() == statement]
+    assert len(at) == 1, f"{statement!r} is not one line of {function.__qualname__}"
+    code, fired = function.__code__, []
+
+    def in_function(frame, event, arg):
+        if event == "line" and frame.f_lineno == at[0] and not fired:
+            fired.append(True)
+            raise KeyboardInterrupt
+        return in_function
+
+    sys.settrace(lambda frame, event, arg: in_function if frame.f_code is code else None)
+    try:
+        yield
+    finally:
+        sys.settrace(None)
+    assert fired, "the line was never reached"
+
+
+@pytest.mark.parametrize("call, statement", [
+    ("step", "self._reset_pending = pending  # before the step leaves the record (see above)"),
+    ("step", "self._in_flight = None"),
+    ("reset", "self._reseed_due = False"),
+    ("reset", "self._needs_reset = False"),
+])
+def test_an_interrupt_inside_the_envs_record_of_a_call_requires_a_reset(call, statement):
+    """Ctrl-C between the statements that record a finished step or reset: a step whose
+    record was half written stepped on with the previous step's resets due (an env whose
+    episode had ended went on past its end); now the env needs reset() until its record is
+    whole, and after it the run is a twin's reset at the same point."""
+    function = stori_jax.Env.recv if call == "step" else stori_jax.Env.reset
+    env, twin = (make("Breakout", autoreset=False, max_episode_frames=20) for _ in range(2))
+    try:
+        env.reset(), twin.reset()
+        actions = np.random.default_rng(0).integers(0, 4, (12, 2))
+        for a in actions[:4]:
+            env.step(a), twin.step(a)
+        with interrupted_at(function, statement), pytest.raises(KeyboardInterrupt):
+            env.step(actions[4]) if call == "step" else env.reset()
+        assert_points_to_reset(env)
+        env.reset(), twin.reset()
+        for a in actions[5:]:  # episodes of 5 steps: ends and resets within these
+            for x, y in zip(env.step(a)[:4], twin.step(a)[:4]):
+                np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+    finally:
+        env.close()
+        twin.close()
+
+
 def test_an_interrupted_reset_says_reset_again():
     """Ctrl-C while the workers reset: step, recv and snapshot all point to reset(), and a
     second reset() gives the same first observation as an uninterrupted one."""
