@@ -671,6 +671,25 @@ def test_envs_started_in_two_threads_at_once_leave_main_as_it_was(monkeypatch):
     assert {k: getattr(main, k, "missing") for k in ("__file__", "__spec__")} == before
 
 
+def test_a_ctrl_c_during_close_comes_once_every_worker_is_gone():
+    """close() waits for a worker that does not answer (here: stopped), then terminates it.
+    A Ctrl-C in that wait stopped the shutdown half way, for good (it runs once): the worker
+    lived on.  Now the interrupt is raised once the workers are gone."""
+    env = make("Breakout", num_workers=2)
+    env.reset()
+    pids = env.backend.pids
+    os.kill(pids[1], signal.SIGSTOP)  # as a worker that is stuck
+    timer = threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGINT))
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            env.close()
+    finally:
+        timer.join()
+    assert env.closed
+    assert all(process_gone(pid) for pid in pids)
+
+
 @contextlib.contextmanager
 def interrupting(owner, method: str):
     """``owner.method`` raises KeyboardInterrupt (a Ctrl-C landing there) inside the block."""

@@ -96,7 +96,14 @@ def _remove_folders(folders: list) -> None:
 
 def _shutdown(processes, conns, owner_pid: int, scratch: list) -> None:
     """Stop every worker: ask politely, then terminate, then kill.  In a process forked from
-    the owner, the workers are the owner's: only this process's copies of the pipes close."""
+    the owner, the workers are the owner's: only this process's copies of the pipes close.
+    A Ctrl-C meanwhile is raised once they are gone (a few seconds at most): the finalizer
+    runs once, so one interrupted here left a worker that no later close() stopped."""
+    with interrupts_deferred():
+        _stop_workers(processes, conns, owner_pid, scratch)
+
+
+def _stop_workers(processes, conns, owner_pid: int, scratch: list) -> None:
     if os.getpid() != owner_pid:
         for conn in conns:
             with contextlib.suppress(OSError):
