@@ -323,11 +323,15 @@ def make_envs(config: PPOConfig):
 
     check_memory(config.num_envs, FRAME_SKIP)  # both halves: named by the whole batch
     half = config.num_envs // 2
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    workers = max(1, min(half, ((cores or 2) - 1) // 2))
     return [stori_jax.make(config.game, config.preset, num_envs=half, seed=env_seed,
-                           obs="atari84", num_workers=workers, inline_envs=0)
+                           obs="atari84", num_workers=workers_per_half(half), inline_envs=0)
             for env_seed in train_env_seeds(config.seed)]
+
+
+def workers_per_half(half: int) -> int:
+    """Emulator workers of each half-batch of ``half`` envs: half the cores but one each."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return max(1, min(half, ((cores or 2) - 1) // 2))
 
 
 def collect(envs, act_fn, params, obs, key, num_steps: int, episodes: list, step0: int):

@@ -16,6 +16,18 @@ def require_at_least_one(parser: argparse.ArgumentParser, **options) -> None:
             parser.error(f"--{name.replace('_', '-')}: must be >= 1, got {value}")
 
 
+def fits_in_memory(parser: argparse.ArgumentParser, flag: str, sizes: list[int]) -> None:
+    """Every batch size in ``sizes`` fits this machine's memory (stori_jax's check of make()),
+    checked before anything is measured: a typo of a size otherwise allocated for minutes or
+    hung building emulators."""
+    from stori_jax.env import FRAME_SKIP, check_memory
+
+    try:
+        check_memory(max(sizes), FRAME_SKIP, flag=flag)
+    except ValueError as error:
+        parser.error(str(error))
+
+
 def options_in_name(parser: argparse.ArgumentParser, args, prefixes: dict[str, str]) -> str:
     """'-<prefix><value>' for every option in ``prefixes`` (its dest -> its prefix in a file
     name) that differs from its default, lists joined by '-' (``--sizes 8 32``: '-B8-32'): a run

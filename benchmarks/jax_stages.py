@@ -22,7 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from _checks import (options_in_name, output_directory,  # this folder: on sys.path
+from _checks import (fits_in_memory, options_in_name, output_directory,  # on sys.path
                      require_at_least_one)
 
 HERE = Path(__file__).resolve().parent
@@ -107,10 +107,13 @@ def measure(sizes: list[int]) -> dict[int, dict[str, float]]:
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--sizes", type=int, nargs="+", default=[32])
-    parser.add_argument("--out", type=Path, default=HERE / "results")
+    parser.add_argument("--sizes", type=int, nargs="+", default=[32],
+                        help="batch sizes B (default 32)")
+    parser.add_argument("--out", type=Path, default=HERE / "results",
+                        help="directory for the results (default benchmarks/results)")
     args = parser.parse_args(argv)
     require_at_least_one(parser, sizes=args.sizes)
+    fits_in_memory(parser, "--sizes", args.sizes)
     output_directory(parser, args.out)
     from stori_jax.provenance import software
 
@@ -131,6 +134,7 @@ def main(argv=None):
     Path(f"{stem}.json").write_text(json.dumps(dict(meta=meta, results=results), indent=1))
     Path(f"{stem}.md").write_text(table)
     print(table)
+    print(f"wrote {stem}.json and .md")
 
 
 if __name__ == "__main__":

@@ -1,7 +1,8 @@
 """Where PPO's training time goes, measured in one run on one machine: stepping the envs with
 random actions (no network), PPO's rollout with agent compute overlapping emulation (two
 half-batches stepped in turn, as baselines/ppo.py does), the same rollout without overlap (one
-batch: choose, then step), and the jitted update, with the game's evidence hyperparameters
+batch on as many emulator workers as the two halves have: choose, then step), and the jitted
+update, with the game's evidence hyperparameters
 (``GAME_HYPERPARAMETERS`` in baselines/run_evidence.py).  Writes JSON, a markdown table and a PNG.
 
     python benchmarks/ppo_rollout.py [--game Breakout] [--preset 3.1] [--network nips] [--repeats 3] [--out DIR]
@@ -95,8 +96,10 @@ def measure_stages(config: ppo.PPOConfig, repeats: int, bar) -> dict:
     finally:
         for env in envs:
             env.close()
+    # as many emulator workers as the two halves have together: the ratio is the overlap's
+    workers = 2 * ppo.workers_per_half(config.num_envs // 2)
     with stori_jax.make(config.game, config.preset, num_envs=config.num_envs, seed=0,
-                        obs="atari84", num_workers=2, inline_envs=0) as env:
+                        obs="atari84", num_workers=workers, inline_envs=0) as env:
         obs, _ = env.reset()
 
         def run():

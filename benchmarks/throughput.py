@@ -28,6 +28,7 @@ import argparse
 import datetime
 import importlib.util
 import json
+import math
 import multiprocessing as mp
 import os
 import socket
@@ -39,8 +40,8 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from _checks import (options_in_name, output_directory, require_at_least_one,  # noqa: E402
-                     stori_games)
+from _checks import (fits_in_memory, options_in_name, output_directory,  # noqa: E402
+                     require_at_least_one, stori_games)
 
 FRAME_SKIP = 4
 WINDOWS = 3  # each rate is the median over this many equal windows (the machine is noisy)
@@ -215,6 +216,12 @@ def envpool_supports(game, preset):
 
 # -- the run ----------------------------------------------------------------------------------
 
+def sweeps(args) -> bool:
+    """Whether the run measures the Breakout 3.1 sweep over --sizes."""
+    return ("Breakout" in (args.games or ["Breakout"])
+            and (args.presets is None or "3.1" in args.presets))
+
+
 def plan_measurements(args):
     import stori_jax
 
@@ -223,8 +230,8 @@ def plan_measurements(args):
                if g in games and (args.presets is None or p in args.presets)]
     w = args.workers
     jobs = []
-    sweep = "Breakout" in games and (args.presets is None or "3.1" in args.presets)
-    for g in games:
+    sweep = sweeps(args)
+    for g in sorted({g for g, _ in presets}, key=games.index):  # the games measured here
         if sweep and g == "Breakout" and args.batch in args.sizes:
             continue  # measured in the sweep below
         jobs.append(dict(kind="emulator limit", game=g, preset="-", B=args.batch, backend="-",
@@ -325,13 +332,17 @@ def markdown(results, meta) -> str:
              "share of a 2.2 preset's timed steps spent in concept 2.", "",
              "| kind | game | preset | backend | obs | B | steps/s | vs limit | vs own 3.1 | "
              "vs naive | atari84/raw | concept 2 |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    failed = []
     for r in results:
+        run = f"{r['kind']} | {r['game']} | {r['preset']} | {r['backend']} | {r['obs']} | {r['B']}"
+        if "error" in r:  # below the table: a cell past the last column is not shown
+            failed.append(f"- {run.replace(' | ', ' ')}: {r['error']}")
         lines.append(
-            f"| {r['kind']} | {r['game']} | {r['preset']} | {r['backend']} | {r['obs']} | "
-            f"{r['B']} | {fmt(r['steps_per_s'], '.0f')} | {fmt(r.get('vs_limit'))} | "
-            f"{fmt(r.get('vs_own_3.1'))} | {fmt(r.get('vs_naive'))} | "
-            f"{fmt(r.get('atari84_vs_raw'))} | {fmt(r.get('concept2_share'))} |"
-            + (f" error: {r['error']}" if "error" in r else ""))
+            f"| {run} | {'failed' if 'error' in r else fmt(r['steps_per_s'], '.0f')} | "
+            f"{fmt(r.get('vs_limit'))} | {fmt(r.get('vs_own_3.1'))} | {fmt(r.get('vs_naive'))} | "
+            f"{fmt(r.get('atari84_vs_raw'))} | {fmt(r.get('concept2_share'))} |")
+    if failed:
+        lines += ["", "Failed runs:", *failed]
     return "\n".join(lines) + "\n"
 
 
@@ -408,17 +419,23 @@ def _check_arguments(parser, args):
     from stori_jax.cli import selected_presets
     from stori_jax.presets import spelt_as_the_paper
 
-    if not args.seconds > 0:
-        parser.error(f"--seconds must be > 0, got {args.seconds}")
+    if not (math.isfinite(args.seconds) and args.seconds > 0):
+        parser.error(f"--seconds must be a finite number > 0, got {args.seconds}")
     require_at_least_one(parser, batch=args.batch, workers=args.workers, sizes=args.sizes)
-    if args.games is not None:
-        args.games = stori_games(parser, "--games", args.games)
+    fits_in_memory(parser, "--batch", [args.batch])
+    if args.sizes is not None:
+        fits_in_memory(parser, "--sizes", args.sizes)
+    if args.games is not None:  # each game once
+        args.games = list(dict.fromkeys(stori_games(parser, "--games", args.games)))
     try:  # the suite's check: every preset named must belong to one of the games
         selected_presets(args.games or (["Breakout"] if args.quick else None), args.presets)
     except ValueError as error:
         parser.error(str(error))
     if args.presets is not None:
-        args.presets = [spelt_as_the_paper(preset) for preset in args.presets]
+        args.presets = list(dict.fromkeys(spelt_as_the_paper(p) for p in args.presets))
+    if args.sizes is not None and not sweeps(args):
+        parser.error("--sizes sets the B of the Breakout 3.1 sweep, which this run does not "
+                     "measure (it needs Breakout among --games and 3.1 among --presets)")
     output_directory(parser, args.out)
 
 

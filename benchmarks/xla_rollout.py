@@ -22,8 +22,8 @@ from tqdm import tqdm
 import stori_jax
 from baselines import ppo
 from stori_jax.provenance import software
-from _checks import (options_in_name, output_directory, require_at_least_one,  # on sys.path
-                     stori_game_and_preset)
+from _checks import (fits_in_memory, options_in_name, output_directory,  # on sys.path
+                     require_at_least_one, stori_game_and_preset)
 from ppo_rollout import median_rate, plot
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -83,14 +83,18 @@ def markdown(game: str, preset: str, steps: int, rows: list[dict]) -> str:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--game", default="Breakout")
-    parser.add_argument("--preset", default="3.1")
-    parser.add_argument("--sizes", type=int, nargs="+", default=[8, 32])
-    parser.add_argument("--steps", type=int, default=128)
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--game", default="Breakout", help="a STORI game (default Breakout)")
+    parser.add_argument("--preset", default="3.1", help="its preset (default 3.1)")
+    parser.add_argument("--sizes", type=int, nargs="+", default=[8, 32],
+                        help="batch sizes B (default 8 32)")
+    parser.add_argument("--steps", type=int, default=128,
+                        help="agent steps per timed rollout (default 128)")
+    parser.add_argument("--repeats", type=int, default=3,
+                        help="timed rollouts per B and way, the median kept (default 3)")
     parser.add_argument("--out", type=Path, default=RESULTS, help="directory for the results")
     args = parser.parse_args(argv)
     require_at_least_one(parser, sizes=args.sizes, steps=args.steps, repeats=args.repeats)
+    fits_in_memory(parser, "--sizes", args.sizes)
     output_directory(parser, args.out)
     args.game, args.preset = stori_game_and_preset(parser, args.game, args.preset)
     made_with = software()  # when the run starts

@@ -33,6 +33,15 @@ def script(monkeypatch, name: str):
                                         "'BankHeist'] (the baselines play the paper's presets)"),
     ("xla_rollout", ["--game", "boxing", "--preset", "3.3"],
      "--preset: unknown preset '3.3' for Boxing: allowed"),
+    # sizes that cannot fit: throughput.py hung building emulators, the others failed late
+    ("throughput", ["--batch", "50000000"], "--batch 50000000 with frame_skip=4 needs"),
+    ("throughput", ["--sizes", "8", "50000000"], "--sizes 50000000 with frame_skip=4 needs"),
+    ("jax_stages", ["--sizes", "50000000"], "choose a smaller --sizes"),
+    ("xla_rollout", ["--sizes", "8", "50000000"], "choose a smaller --sizes"),
+    ("throughput", ["--seconds", "inf"], "--seconds must be a finite number > 0, got inf"),
+    ("throughput", ["--games", "Gopher", "--sizes", "8"],  # was measured as nothing, silently
+     "--sizes sets the B of the Breakout 3.1 sweep, which this run does not measure"),
+    ("throughput", ["--presets", "2.2", "--sizes", "8"], "--sizes sets the B of the Breakout"),
 ])
 def test_bad_arguments_are_usage_errors_naming_the_option(monkeypatch, capsys, tmp_path,
                                                           name, argv, message):
@@ -62,7 +71,7 @@ def test_preset_names_are_spelt_as_the_paper_does(monkeypatch):
 
     throughput = script(monkeypatch, "throughput")
     parser = argparse.ArgumentParser()
-    args = argparse.Namespace(seconds=1.0, batch=8, workers=1, sizes=[8], games=None,
+    args = argparse.Namespace(seconds=1.0, batch=8, workers=1, sizes=None, games=None,
                               presets=["3.2a", "2.1"], quick=False, out=Path("results"))
     throughput._check_arguments(parser, args)
     assert args.presets == ["3.2A", "2.1"]

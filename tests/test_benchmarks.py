@@ -295,6 +295,17 @@ def test_a_subset_measures_only_what_it_names(monkeypatch):
     sweep = planned(throughput, quick=True, sizes=[8, 16], presets=["3.1"])
     assert {k[3] for k in sweep if k[0] == "emulator limit"} == {8, 16, 32}
     assert ("stori-jax", "Breakout", "3.1", 32, "subproc", "raw") in sweep  # B not in the sweep
+    # a game with none of the presets named has no row to compare with its emulator limit
+    only_32 = planned(throughput, presets=["3.2"], sizes=[8], skip_naive=True)
+    assert {k[1] for k in only_32 if k[0] == "emulator limit"} == {"Gopher", "BankHeist"}
+
+
+def test_a_game_or_preset_named_twice_is_measured_once(monkeypatch, tmp_path):
+    throughput = script(monkeypatch, "throughput")
+    args = throughput_args(games=["Gopher", "gopher"], presets=["2.1", "2.1"], sizes=None,
+                           out=tmp_path)
+    throughput._check_arguments(argparse.ArgumentParser(), args)
+    assert (args.games, args.presets) == (["Gopher"], ["2.1"])
 
 
 # -- throughput.py: what a run writes -----------------------------------------------------------
@@ -314,6 +325,19 @@ def fake_results():
     rows.append(dict(kind="stori-jax", game="Breakout", preset="2.2", B=32, backend="subproc",
                      obs="atari84", steps_per_s=1500.0, concept2_share=0.75))
     return [dict(r, W=2) for r in rows]
+
+
+def test_a_failed_run_shows_as_failed_and_its_error_below_the_table(monkeypatch):
+    """The error was a cell past the table's last column, which markdown does not show: the
+    failed run read as a row of '-'."""
+    throughput = script(monkeypatch, "throughput")
+    rows = fake_results()
+    rows[-1] = dict(rows[-1], steps_per_s=None, error="ValueError: no emulator")
+    text = throughput.markdown(throughput.add_ratios(rows), dict(date="d", host="h", cores=2,
+                                                                 workers=2))
+    assert table(text)[-1]["steps/s"] == "failed"
+    assert text.rstrip().endswith("Failed runs:\n- stori-jax Breakout 2.2 subproc atari84 32: "
+                                  "ValueError: no emulator")
 
 
 def test_the_table_columns_hold_what_their_headers_say(monkeypatch):
@@ -356,7 +380,7 @@ def test_a_run_writes_json_a_table_and_the_plots_it_names(monkeypatch, tmp_path,
     (["--sizes", "8", "16", "32", "64"], ""),  # the defaults, spelt out
     (["--quick"], "-quick"),
     (["--quick", "--sizes", "8", "32"], "-quick"),
-    (["--games", "boxing", "--presets", "3.1", "2.2", "--sizes", "32"], "-Boxing-3.1-2.2-B32"),
+    (["--games", "boxing", "--presets", "3.1", "2.2"], "-Boxing-3.1-2.2"),
     (["--batch", "64", "--sizes", "64"], "-B64-batch64"),
     (["--skip-naive"], "-no-naive"),
     (["--seconds", "0.5", "--workers", "7"], "-workers7-seconds0.5"),
