@@ -104,7 +104,7 @@ def check_no_result(path: Path, force: bool, elsewhere: str = "another --out"):
 def cmd_train(args) -> int:
     from baselines.evaluate import (EVAL_SEED_OFFSET, check_eval_seed, evaluate, result_path,
                                     write_result)
-    from baselines.ppo import PPOConfig, check_no_finished_run, train
+    from baselines.ppo import PPOConfig, check_no_finished_run, check_no_run_here, train
     from stori_jax.checks import check_int
     from stori_jax.cli import check_out
     from stori_jax.folders import removed_if_left_empty
@@ -119,9 +119,9 @@ def cmd_train(args) -> int:
         if name not in settable:
             raise ValueError(f"unknown PPO hyperparameter {name!r}; --set takes {settable}")
     try:
-        config = PPOConfig.from_overrides(  # --steps last: whether it fits may hang on --set
-            PPOConfig(game=args.game, preset=args.preset, seed=args.seed), overrides)
-        config = dataclasses.replace(config, total_steps=args.steps)
+        config = PPOConfig.from_overrides(  # checked once, --steps with the --set values
+            PPOConfig(game=args.game, preset=args.preset, seed=args.seed),
+            {**overrides, "total_steps": str(args.steps)})
     except ValueError as error:  # name the flag the user gave, not the config field
         message = str(error)
         for name, flag in flags.items():
@@ -130,14 +130,12 @@ def cmd_train(args) -> int:
         raise
     out = args.out or run_dir(DEFAULT_ROOT, config.game, config.preset, "ppo", config.seed)
     check_out("--out", out, directory=True)
-    if not args.resume and (out / "checkpoint.pkl").exists():
-        raise ValueError(f"{out} already holds a run: pass --resume to continue it, or another "
-                         "--out")
     if args.resume and not (out / "checkpoint.pkl").exists():
+        check_no_finished_run(out, "--resume: ")  # a finished run's checkpoint is gone
         raise ValueError(f"--resume: {out} holds no checkpoint.pkl (a run stopped before its "
                          "first checkpoint has nothing to continue): run without --resume")
     if not args.resume:  # train() checks it too: here, before the evaluation's checks
-        check_no_finished_run(out)
+        check_no_run_here(out)
     if args.force and not args.eval_episodes:
         raise ValueError("--force replaces an evaluation: it needs --eval-episodes")
     if args.eval_episodes:  # checked before training, not after it

@@ -129,8 +129,8 @@ class PPOConfig:
             raise ValueError(f"total_steps is too large for anneal_lr: {self.num_iterations} "
                              f"iterations x {updates_per_iteration(self)} updates each = "
                              f"{updates} optimizer updates, the learning-rate schedule counts "
-                             f"at most {np.iinfo(np.int32).max}; train fewer steps (or set "
-                             "anneal_lr=false)")
+                             f"at most {np.iinfo(np.int32).max}; train fewer steps, or turn "
+                             "anneal_lr off (--set anneal_lr=false)")
         num_actions = stori_jax.get_game(self.game).num_actions
         if self.action_head == "factored" and num_actions != len(FULL_ACTION_SET):
             raise ValueError(f"action_head='factored' needs a game that plays ALE's full "
@@ -581,19 +581,28 @@ def _software_parts(ckpt: dict, start: int, made_with: dict, path: Path) -> list
     return parts + [dict(from_iteration=start, software=made_with)]
 
 
-def check_no_finished_run(out: Path) -> None:
-    """A fresh run is not trained over a finished one (its summary or an evaluation there)
-    whose checkpoint is missing (checkpoints are not committed): it would start again over
-    its files and leave the old evaluations beside the new run.  A run stopped before its
-    first checkpoint (no summary yet) is simply started again."""
+def check_no_run_here(out: Path) -> None:
+    """A fresh run is not trained over another: one with a checkpoint (resume it instead), or
+    a finished one whose checkpoint is gone (:func:`check_no_finished_run`).  A run stopped
+    before its first checkpoint (no summary yet) is simply started again."""
+    if (out / "checkpoint.pkl").exists():
+        raise ValueError(f"{out} already holds a run: pass --resume to continue it (resume=True "
+                         "in Python), or another --out")
+    check_no_finished_run(out)
+
+
+def check_no_finished_run(out: Path, prefix: str = "") -> None:
+    """Refuse ``out`` if it holds a finished run (its summary or an evaluation) whose
+    checkpoint is gone (checkpoints are not committed): it cannot be continued, and a fresh
+    run there would start again over its files and leave the old evaluations beside it."""
     finished = [path.name for path in [out / "summary.json", *sorted(out.glob("eval-*.json"))]
                 if path.exists()]
-    if finished:
-        raise ValueError(f"{out} holds a finished run ({', '.join(finished)}) without the "
-                         "checkpoint.pkl to resume it from (checkpoints are not committed): "
-                         "training there would start again over its files and leave its "
-                         "evaluations beside the new run; train into another directory "
-                         "(stori-jax train --out DIR)")
+    if finished and not (out / "checkpoint.pkl").exists():
+        raise ValueError(f"{prefix}{out} holds a finished run ({', '.join(finished)}) without "
+                         "its checkpoint.pkl (checkpoints are not committed): it cannot be "
+                         "continued, and a new run there would leave its evaluations beside "
+                         "yours; train into another directory (stori-jax train ppo ... --out "
+                         "DIR)")
 
 
 def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool = True,
@@ -617,7 +626,7 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
     last = config.num_iterations if stop_after is None else min(stop_after,
                                                                 config.num_iterations)
     if not resume:
-        check_no_finished_run(out)
+        check_no_run_here(out)
     ckpt = _checked_checkpoint(config, ckpt_path, stop_after) if resume else None
     if ckpt is not None and ckpt["iteration"] == last:  # nothing to train
         parts = _recorded_parts(ckpt)

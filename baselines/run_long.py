@@ -58,18 +58,14 @@ def evaluate_once(config, checkpoint: Path, out_dir: Path, *, episodes: int, num
 
 
 def _iterations_done(run: Path) -> int:
-    """How far the run in ``run`` has trained: its checkpoint's iteration (0 for no run).  A
-    run logged there without a checkpoint to resume from is refused: training would start it
-    again over its files."""
-    from baselines.ppo import load_checkpoint
+    """How far the run in ``run`` has trained: its checkpoint's iteration (0 for no run, or
+    one stopped before its first checkpoint, which starts again).  A finished run whose
+    checkpoint is gone is refused (:func:`baselines.ppo.check_no_finished_run`)."""
+    from baselines.ppo import check_no_finished_run, load_checkpoint
 
     if (run / "checkpoint.pkl").exists():
         return load_checkpoint(run / "checkpoint.pkl")["iteration"]
-    logged = [name for name in ("summary.json", "log.csv") if (run / name).exists()]
-    if logged:
-        raise ValueError(f"{run} holds a run ({', '.join(logged)}) but no checkpoint.pkl to "
-                         "resume it from (checkpoints are not committed): give --out an empty "
-                         "directory to train it again")
+    check_no_finished_run(run)
     return 0
 
 

@@ -126,6 +126,11 @@ class EnvpoolBackend:
         if self._closed:
             raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
 
+    def _check_idle(self):
+        self._check()
+        if self._pending is not None:
+            raise RuntimeError("a command is in flight: call recv() before sending again")
+
     # Each command is sent, and each result taken, with Ctrl-C held over the call and its
     # record (stori_jax.backends.interrupts): the pool's wait is C++ and cannot be interrupted
     # anyway, and a KeyboardInterrupt between a call and its record left a reset queued behind
@@ -135,9 +140,7 @@ class EnvpoolBackend:
     def send_reset(self, seed: int | None = None) -> None:
         """Reset every env; with ``seed``, on a new pool of that seed (envpool cannot reseed
         one: a pool of the same seed starts its emulators alike)."""
-        self._check()
-        if self._pending is not None:
-            raise RuntimeError("a command is in flight: call recv() before sending again")
+        self._check_idle()
         with interrupts_deferred():
             if seed is not None:
                 pool, self.pool = self.pool, self._make_pool(seed)
@@ -146,9 +149,7 @@ class EnvpoolBackend:
             self._pending = "reset"
 
     def send_step(self) -> None:
-        self._check()
-        if self._pending is not None:
-            raise RuntimeError("a command is in flight: call recv() before sending again")
+        self._check_idle()
         actions = self.views["executed"][:, 0].astype(np.int32)
         with interrupts_deferred():
             self.pool.send(actions)

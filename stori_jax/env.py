@@ -349,6 +349,7 @@ class Env:
         then needs ``reset()`` again, which first waits for the late reset (and restarts from
         the seed asked for, if the late one did).  As in :meth:`recv`."""
         self._check_open()
+        self._drop_unrecorded_step()
         if seed is not None:
             seed = check_int("seed", seed, 0, MAX_SEED)
         deadline = self._deadline(timeout, "reset")
@@ -516,6 +517,7 @@ class Env:
         from stori_jax import xla
 
         self._check_open()
+        self._drop_unrecorded_step()
         if self._xla_driven:
             raise RuntimeError("xla() was already called: keep stepping its latest handle, or "
                                "reset() the env first")
@@ -594,6 +596,7 @@ class Env:
         steps (nothing in flight).  Restore it with :meth:`restore` into an env made with the
         same arguments (e.g. after a restart, to resume training)."""
         self._check_open()
+        self._drop_unrecorded_step()
         if self._in_flight is not None or self._needs_reset or self._xla_driven:
             raise RuntimeError("snapshot() needs a settled env: reset() it, and recv() any step "
                                "in flight, first (an env stepped by env.xla() needs reset())")
@@ -614,6 +617,7 @@ class Env:
         """Continue from ``snapshot`` (taken by :meth:`snapshot` of an env made alike; its seed
         may differ: the emulators and the key come from the snapshot, and so does ``seed``)."""
         self._check_open()
+        self._drop_unrecorded_step()
         if not isinstance(snapshot, dict) or set(snapshot) != {
                 "plan", "seed", "state", "reset_pending", "emulators"}:
             raise ValueError("snapshot must be a dict returned by Env.snapshot()")

@@ -624,8 +624,9 @@ def test_stages_refuse_what_they_cannot_resume(staged, tmp_path):
         run_long.train_in_stages(tiny(), run, tmp_path / "elsewhere", stages=(1,), episodes=2,
                                  num_envs=2, progress=False)
     (run / "checkpoint.pkl").unlink()
-    with pytest.raises(ValueError, match=r"run holds a run \(summary.json, log.csv\) but no "
-                                         r"checkpoint.pkl to resume it from"):
+    with pytest.raises(ValueError, match=r"run holds a finished run \(summary.json, "
+                                         r"eval-sampled.json\) without "
+                                         r"its checkpoint.pkl"):
         run_long.train_in_stages(tiny(), run, tmp_path / "elsewhere", stages=(1,), episodes=2,
                                  num_envs=2, progress=False)
     assert (run / "log.csv").read_text() == log
@@ -1441,6 +1442,11 @@ def test_the_curves_legend_names_every_line_of_every_panel_in_one_colour_per_see
     (["train", "ppo", "--game", "Breakout", "--preset", "4"], "preset"),
     (["train", "ppo", "--game", "Breakout", "--steps", "1000000000000"],  # optax: OverflowError
      "--steps is too large for anneal_lr: 976562500 iterations x 16 updates each"),
+    # checked on the config asked for, not on one with the default --steps (the --out check
+    # after it is what refuses this run)
+    (["train", "ppo", "--game", "Breakout", "--steps", "2", "--set", "num_envs=2", "--set",
+      "num_steps=1", "--set", "num_minibatches=1", "--set", "update_epochs=50000", "--out",
+      "/dev/null"], "--out /dev/null exists and is not a directory"),
     (["train", "ppo", "--game", "Breakout", "--set", "lr"], "FIELD=VALUE"),
     (["train", "ppo", "--game", "Breakout", "--set", "nope=1"],
      "unknown PPO hyperparameter 'nope'; --set takes ['action_head', "),
@@ -1491,8 +1497,12 @@ def test_a_finished_run_without_its_checkpoint_is_not_trained_over(uninterrupted
     before = {p.name: p.read_bytes() for p in committed.iterdir()}
     assert main(["train", "ppo", "--game", "Breakout", "--out", str(committed), "--quiet",
                  "--eval-episodes", "1", "--force"]) == 2
-    assert ("holds a finished run (summary.json, eval-sampled.json) without the checkpoint.pkl"
+    assert ("holds a finished run (summary.json, eval-sampled.json) without its checkpoint.pkl"
             in capsys.readouterr().err)
+    assert main(["train", "ppo", "--game", "Breakout", "--out", str(committed), "--quiet",
+                 "--resume"]) == 2  # not "run without --resume"
+    assert (f"--resume: {committed} holds a finished run (summary.json, eval-sampled.json) "
+            "without its checkpoint.pkl" in capsys.readouterr().err)
     (committed / "summary.json").unlink()
     with pytest.raises(ValueError, match=r"holds a finished run \(eval-sampled.json\)"):
         ppo.train(tiny(), committed, progress=False, stop_after=1)

@@ -684,10 +684,12 @@ def test_a_ctrl_c_during_close_comes_once_every_worker_is_gone():
     try:
         with pytest.raises(KeyboardInterrupt):
             env.close()
+        assert env.closed
+        assert all(process_gone(pid) for pid in pids)
     finally:
         timer.join()
-    assert env.closed
-    assert all(process_gone(pid) for pid in pids)
+        with contextlib.suppress(ProcessLookupError):  # only where the test failed: a stopped
+            os.kill(pids[1], signal.SIGKILL)           # worker hangs multiprocessing's exit
 
 
 @contextlib.contextmanager
@@ -734,7 +736,7 @@ def interrupted_at(function, statement: str):
     import inspect
 
     lines, first = inspect.getsourcelines(function)
-    at = [first + i for i, line in enumerate(lines) if line.strip() == statement]
+    at = [first + i for i, line in enumerate(lines) if line.split("#")[0].strip() == statement]
     assert len(at) == 1, f"{statement!r} is not one line of {function.__qualname__}"
     code, fired = function.__code__, []
 
@@ -753,12 +755,13 @@ def interrupted_at(function, statement: str):
 
 
 @pytest.mark.parametrize("call, statement", [
-    ("step", "self._reset_pending = pending  # before the step leaves the record (see above)"),
+    ("step", "self._reset_pending = pending"),
     ("step", "self._in_flight = None"),
     ("reset", "self._reseed_due = False"),
     ("reset", "self._needs_reset = False"),
 ])
-def test_an_interrupt_inside_the_envs_record_of_a_call_requires_a_reset(call, statement):
+@pytest.mark.parametrize("then", ["reset", "step", "restore"])
+def test_an_interrupt_inside_the_envs_record_of_a_call_requires_a_reset(call, statement, then):
     """Ctrl-C between the statements that record a finished step or reset: a step whose
     record was half written stepped on with the previous step's resets due (an env whose
     episode had ended went on past its end); now the env needs reset() until its record is
@@ -772,8 +775,14 @@ def test_an_interrupt_inside_the_envs_record_of_a_call_requires_a_reset(call, st
             env.step(a), twin.step(a)
         with interrupted_at(function, statement), pytest.raises(KeyboardInterrupt):
             env.step(actions[4]) if call == "step" else env.reset()
-        assert_points_to_reset(env)
-        env.reset(), twin.reset()
+        # reset() or restore() straight away recover too (they called the backend's recv for
+        # a step it had handed over: refused, every time)
+        if then == "restore":
+            env.restore(twin.snapshot())
+        else:
+            if then == "step":
+                assert_points_to_reset(env)
+            env.reset(), twin.reset()
         for a in actions[5:]:  # episodes of 5 steps: ends and resets within these
             for x, y in zip(env.step(a)[:4], twin.step(a)[:4]):
                 np.testing.assert_array_equal(np.asarray(x), np.asarray(y))

@@ -5,8 +5,10 @@ between sending a command to one worker and the next, or between reading a worke
 recording it.  The env then no longer knows which workers owe a reply, and its next step reads
 buffers that are still being written.  Inside :func:`interrupts_deferred` a Ctrl-C is noted and
 raised when the block ends, where the records agree with the workers again.  Only short blocks
-that never wait use it: a wait for the workers stays interruptible, and leaves the command in
-flight for the next ``recv()``.
+use it: a wait for the workers' replies stays interruptible, and leaves the command in flight
+for the next ``recv()``.  The exceptions are bounded: envpool's calls (its waits are C++, which a
+Ctrl-C does not interrupt anyway) and ``close()``'s shutdown of the workers (a few seconds at
+most), which runs once and must not stop half way.
 """
 
 from __future__ import annotations

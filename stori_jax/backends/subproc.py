@@ -94,11 +94,15 @@ def _remove_folders(folders: list) -> None:
         shutil.rmtree(folders.pop(), ignore_errors=True)
 
 
+STOP_WAIT_S = 1.0  # how long close() waits for the workers to stop, then to be terminated
+
+
 def _shutdown(processes, conns, owner_pid: int, scratch: list) -> None:
     """Stop every worker: ask politely, then terminate, then kill.  In a process forked from
     the owner, the workers are the owner's: only this process's copies of the pipes close.
-    A Ctrl-C meanwhile is raised once they are gone (a few seconds at most): the finalizer
-    runs once, so one interrupted here left a worker that no later close() stopped."""
+    A Ctrl-C meanwhile is raised once they are gone (each stage waits at most STOP_WAIT_S for
+    all of them together, so about 3 s at most): the finalizer runs once, so one interrupted
+    here left a worker that no later close() stopped."""
     with interrupts_deferred():
         _stop_workers(processes, conns, owner_pid, scratch)
 
@@ -114,15 +118,13 @@ def _stop_workers(processes, conns, owner_pid: int, scratch: list) -> None:
             conn.send_bytes(b"C")
         except (OSError, ValueError):
             pass
-    for p in processes:
-        p.join(timeout=1.0)
-    for p in processes:
-        if p.is_alive():
-            p.terminate()
-            p.join(timeout=1.0)
-        if p.is_alive():
-            p.kill()
-            p.join(timeout=1.0)
+    for stop in (None, "terminate", "kill"):  # asked to close (above), then forced
+        alive = [p for p in processes if p.is_alive()]
+        for p in alive if stop else ():
+            getattr(p, stop)()
+        deadline = time.monotonic() + STOP_WAIT_S  # one wait for them all, not one each
+        for p in alive:
+            p.join(timeout=max(0.0, deadline - time.monotonic()))
     for conn in conns:
         try:
             conn.close()
