@@ -586,23 +586,24 @@ def check_no_run_here(out: Path) -> None:
     a finished one whose checkpoint is gone (:func:`check_no_finished_run`).  A run stopped
     before its first checkpoint (no summary yet) is simply started again."""
     if (out / "checkpoint.pkl").exists():
-        raise ValueError(f"{out} already holds a run: pass --resume to continue it (resume=True "
-                         "in Python), or another --out")
+        raise ValueError(f"{out} already holds a run: resume it (stori-jax train ppo ... "
+                         "--resume), or train into another directory (--out DIR)")
     check_no_finished_run(out)
 
 
-def check_no_finished_run(out: Path, prefix: str = "") -> None:
+def check_no_finished_run(out: Path, prefix: str = "",
+                          elsewhere: str = "stori-jax train ppo ... --out DIR") -> None:
     """Refuse ``out`` if it holds a finished run (its summary or an evaluation) whose
     checkpoint is gone (checkpoints are not committed): it cannot be continued, and a fresh
-    run there would start again over its files and leave the old evaluations beside it."""
+    run there would start again over its files and leave the old evaluations beside it.
+    ``prefix`` and ``elsewhere`` (how to train into another directory) word it for a caller."""
     finished = [path.name for path in [out / "summary.json", *sorted(out.glob("eval-*.json"))]
                 if path.exists()]
     if finished and not (out / "checkpoint.pkl").exists():
         raise ValueError(f"{prefix}{out} holds a finished run ({', '.join(finished)}) without "
                          "its checkpoint.pkl (checkpoints are not committed): it cannot be "
                          "continued, and a new run there would leave its evaluations beside "
-                         "yours; train into another directory (stori-jax train ppo ... --out "
-                         "DIR)")
+                         f"yours; train into another directory ({elsewhere})")
 
 
 def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool = True,

@@ -65,7 +65,7 @@ def _iterations_done(run: Path) -> int:
 
     if (run / "checkpoint.pkl").exists():
         return load_checkpoint(run / "checkpoint.pkl")["iteration"]
-    check_no_finished_run(run)
+    check_no_finished_run(run, elsewhere="give run_long.py an empty --out")
     return 0
 
 

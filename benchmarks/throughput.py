@@ -2,7 +2,8 @@
 
     python benchmarks/throughput.py            # everything (about 18 minutes on 2 cores)
     python benchmarks/throughput.py --quick    # Breakout only, fewer sizes (about 7 minutes)
-    python benchmarks/throughput.py --games Boxing --presets 3.1 2.2 --sizes 32   # a subset
+    python benchmarks/throughput.py --games Boxing --presets 3.1 2.2   # a subset
+    python benchmarks/throughput.py --presets 3.1 --sizes 8 32   # the Breakout 3.1 sweep's B
 
 Measured (agent steps per second, frame skip 4, summed over the batch):
 - emulator limit: W plain processes each looping bare ``ale_py.ALEInterface`` emulators doing

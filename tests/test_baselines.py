@@ -1491,6 +1491,10 @@ def test_a_finished_run_without_its_checkpoint_is_not_trained_over(uninterrupted
     import shutil
 
     full, _ = uninterrupted
+    before = {p.name: p.read_bytes() for p in full.iterdir()}
+    with pytest.raises(ValueError, match="already holds a run: resume it"):
+        ppo.train(tiny(), full, progress=False)  # from Python too, not started over
+    assert {p.name: p.read_bytes() for p in full.iterdir()} == before
     committed = tmp_path / "committed"
     shutil.copytree(full, committed, ignore=shutil.ignore_patterns("checkpoint.pkl"))
     (committed / "eval-sampled.json").write_text("{}")
