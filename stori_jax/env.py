@@ -325,6 +325,7 @@ class Env:
         return getattr(self, "_owner_pid", None) not in (None, getpid())
 
     def _check_open(self):
+        """Where every call of the env begins."""
         if self._made_elsewhere():
             raise RuntimeError(
                 f"this env was made in process {self._owner_pid}, and this process "
@@ -332,6 +333,7 @@ class Env:
                 "Make an env in this process (started with the 'spawn' method)")
         if self.closed:
             raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
+        self._drop_unrecorded_step()  # every call begins with a record that agrees
         raise_lost_interrupt()  # a Ctrl-C Python dropped since: nothing has started yet
 
     # -- reset ----------------------------------------------------------------------------------
@@ -349,7 +351,6 @@ class Env:
         then needs ``reset()`` again, which first waits for the late reset (and restarts from
         the seed asked for, if the late one did).  As in :meth:`recv`."""
         self._check_open()
-        self._drop_unrecorded_step()
         if seed is not None:
             seed = check_int("seed", seed, 0, MAX_SEED)
         deadline = self._deadline(timeout, "reset")
@@ -414,7 +415,6 @@ class Env:
     def send(self, actions) -> None:
         """Start one step of every env with ``actions`` (B,) ints."""
         self._check_open()
-        self._drop_unrecorded_step()
         if self._needs_reset:
             raise RuntimeError("call reset() first (before the first step, and after an "
                                "interrupted step or reset)")
@@ -461,7 +461,6 @@ class Env:
         most ``MAX_TIMEOUT_S`` (a million seconds)."""
         self._check_open()
         deadline = self._deadline(timeout, "recv")
-        self._drop_unrecorded_step()
         if self._in_flight is None:
             if not self._needs_reset:
                 self._refuse_if_workers_busy()
@@ -517,7 +516,6 @@ class Env:
         from stori_jax import xla
 
         self._check_open()
-        self._drop_unrecorded_step()
         if self._xla_driven:
             raise RuntimeError("xla() was already called: keep stepping its latest handle, or "
                                "reset() the env first")
@@ -596,7 +594,6 @@ class Env:
         steps (nothing in flight).  Restore it with :meth:`restore` into an env made with the
         same arguments (e.g. after a restart, to resume training)."""
         self._check_open()
-        self._drop_unrecorded_step()
         if self._in_flight is not None or self._needs_reset or self._xla_driven:
             raise RuntimeError("snapshot() needs a settled env: reset() it, and recv() any step "
                                "in flight, first (an env stepped by env.xla() needs reset())")
@@ -617,7 +614,6 @@ class Env:
         """Continue from ``snapshot`` (taken by :meth:`snapshot` of an env made alike; its seed
         may differ: the emulators and the key come from the snapshot, and so does ``seed``)."""
         self._check_open()
-        self._drop_unrecorded_step()
         if not isinstance(snapshot, dict) or set(snapshot) != {
                 "plan", "seed", "state", "reset_pending", "emulators"}:
             raise ValueError("snapshot must be a dict returned by Env.snapshot()")
