@@ -217,16 +217,22 @@ def envpool_supports(game, preset):
 
 # -- the run ----------------------------------------------------------------------------------
 
+def games_of(args) -> list[str]:
+    """The games the run measures: --games, else Breakout for --quick, else all four."""
+    import stori_jax
+
+    return args.games or (["Breakout"] if args.quick else list(stori_jax.STORI_GAMES))
+
+
 def sweeps(args) -> bool:
     """Whether the run measures the Breakout 3.1 sweep over --sizes."""
-    return ("Breakout" in (args.games or ["Breakout"])
-            and (args.presets is None or "3.1" in args.presets))
+    return "Breakout" in games_of(args) and (args.presets is None or "3.1" in args.presets)
 
 
 def plan_measurements(args):
     import stori_jax
 
-    games = args.games or (["Breakout"] if args.quick else list(stori_jax.STORI_GAMES))
+    games = games_of(args)
     presets = [(g, p) for g, p in stori_jax.list_presets()
                if g in games and (args.presets is None or p in args.presets)]
     w = args.workers

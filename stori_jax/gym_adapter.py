@@ -81,6 +81,12 @@ def _names(game, preset, registered: tuple[str, str]) -> bool:
         return False
 
 
+def _closed_error(message: str) -> Exception:
+    from stori_jax.backends.subproc import EnvClosedError  # not imported until needed
+
+    return EnvClosedError(message)
+
+
 class _Owner:
     """Holds one stori_jax Env (made again only after a worker died)."""
 
@@ -121,20 +127,16 @@ class _Owner:
         self.closed = False
 
     def _check_open(self):
-        from stori_jax.backends.subproc import EnvClosedError
-
         if self.closed:
-            raise EnvClosedError("this environment is closed; make a new one with "
-                                 "gymnasium.make or gymnasium.make_vec")
+            raise _closed_error("this environment is closed; make a new one with "
+                                "gymnasium.make or gymnasium.make_vec")
 
     def _check_steppable(self):
         self._check_open()
         if self._env.closed:  # closed by a worker's death (only close() closes it otherwise)
-            from stori_jax.backends.subproc import EnvClosedError
-
-            raise EnvClosedError("a worker of this environment died (the step that said so "
-                                 "raised WorkerError); reset() makes the env again from its "
-                                 "seed")
+            raise _closed_error("a worker of this environment died (the step that said so "
+                                "raised WorkerError); reset() makes the env again from its "
+                                "seed")
 
     def _reset_env(self, seed):
         """Reset the env: an explicit seed restarts everything (emulators and key) from that
