@@ -61,9 +61,11 @@ def list_presets() -> list[tuple[str, str]]:
 
 
 def _canonical_game(game: str) -> str:
-    for g, _ in _PRESETS:
-        if isinstance(game, str) and g.lower() == game.lower():
-            return g
+    from stori_jax.games import stori_spec_named
+
+    spec = stori_spec_named(game)  # every spelling make() and get_game() accept ('bank_heist')
+    if spec is not None and any(g == spec.name for g, _ in _PRESETS):
+        return spec.name
     games = sorted({g for g, _ in _PRESETS})
     raise ValueError(f"unknown game {game!r} for presets: allowed {games} (another ale-py game "
                      "takes no preset, which plays it as 3.1, or a Config)")

@@ -85,7 +85,25 @@ def test_preset_matches_spec(game, name, words, parts, type_):
         assert config.drift.secondary.type == "3.2"
     assert describe_preset(game, name) == words
     assert preset(game.lower(), name) == config  # game names are case-insensitive
+    assert preset(get_game(game).rom_id, name) == config  # and ale-py ids ('bank_heist') name them
     get_game(game).validate(config)
+
+
+def test_a_game_spelt_as_its_ale_id_takes_a_preset_everywhere():
+    """make('bank_heist') worked while make('bank_heist', preset='1') was refused as an unknown
+    game, in an error that listed 'BankHeist'."""
+    import stori_jax
+    from stori_jax.cli import main
+
+    env = stori_jax.make("bank_heist", preset="1", num_envs=1, seed=0, num_workers=0)
+    try:
+        assert env.config == preset("BankHeist", "1")
+    finally:
+        env.close()
+    assert main(["run", "bank_heist", "2.1", "--steps", "2", "--num-envs", "1",
+                 "--num-workers", "0", "--quiet"]) == 0
+    with pytest.raises(ValueError, match="unknown game 'pong' for presets"):
+        preset("pong", "1")
 
 
 def test_preset_details():

@@ -33,15 +33,25 @@ def ale_rom_ids() -> tuple[str, ...]:
     return tuple(roms.get_all_rom_ids())
 
 
+def stori_spec_named(name) -> GameSpec | None:
+    """The GameSpec of the STORI game ``name`` spells ('BankHeist', 'bankheist', 'bank_heist'), or
+    None when ``name`` is not one of the four."""
+    if not isinstance(name, str):
+        return None
+    for spec in _stori_specs().values():
+        if name.lower() in (spec.name.lower(), spec.rom_id):
+            return spec
+    return None
+
+
 def get_game(name: str) -> GameSpec:
     """The GameSpec of ``name`` (a STORI game, or any ale-py game id such as 'Pong' or 'pong';
     one spec per game, however it is spelled)."""
     if not isinstance(name, str) or not name:
         raise ValueError(f"game must be a non-empty string, got {name!r}")
-    specs = _stori_specs()
-    for spec in specs.values():
-        if name.lower() in (spec.name.lower(), spec.rom_id):
-            return spec
+    spec = stori_spec_named(name)
+    if spec is not None:
+        return spec
     rom_id = name if name in ale_rom_ids() else rom_id_of(name)
     if rom_id not in ale_rom_ids():
         raise ValueError(f"unknown game {name!r}: allowed are the STORI games {list(STORI_GAMES)} "
