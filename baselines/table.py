@@ -214,6 +214,10 @@ def _cell(entry) -> str:
     return f"{entry['mean']:.2f} ± {entry['std']:.2f}"
 
 
+STD_OVER_SEEDS = ("Ours: mean ± std over seeds of each seed's mean return, the std with "
+                  "ddof = 1; the paper's: its mean ± std over seeds 0, 7, 13 (its ddof unstated).")
+
+
 def markdown(rows: list[dict], ppo_policy: str = "sampled") -> str:
     """The table; its PPO column names the policy where it is not the default, sampled."""
     ppo = "PPO (ours)" if ppo_policy == "sampled" else f"PPO {ppo_policy} (ours)"
@@ -235,7 +239,7 @@ def markdown(rows: list[dict], ppo_policy: str = "sampled") -> str:
 def learning_curves(results_dir: Path) -> dict[tuple[str, str], list[tuple]]:
     """Per (game, preset), per training run: (global_step and return of every episode, seed,
     the run's last agent step, its config)."""
-    curves = defaultdict(list)
+    curves, where = defaultdict(list), defaultdict(dict)
     for path in sorted(Path(results_dir).rglob("episodes.csv")):
         config_path = path.parent / "config.json"
         if not config_path.exists():
@@ -267,6 +271,11 @@ def learning_curves(results_dir: Path) -> dict[tuple[str, str], list[tuple]]:
             raise ValueError(f"{path}: a global_step or return is not a number ({e})") from None
         curves[(game, preset)].append(
             (steps, returns, seed, _last_step(path.parent, steps), config))
+        if seed in where[(game, preset)]:  # as aggregate() refuses two evaluations of a seed
+            raise ValueError(f"two training runs of {game} {preset} seed {seed}: "
+                             f"{where[(game, preset)][seed]} and {path.parent} (the curves "
+                             "would pool both as one seed; move one out of RESULTS_DIR)")
+        where[(game, preset)][seed] = path.parent
     for runs in curves.values():
         runs.sort(key=lambda run: run[2])
     return curves
@@ -478,9 +487,11 @@ def build_table(results_dir: Path, out_dir: Path | None = None,
         print(f"stori-jax table: note: {note}", file=sys.stderr)
     text = markdown(rows, ppo_policy)
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "table.md").write_text(text + "".join(f"\n- {note}" for note in notes)
+    (out_dir / "table.md").write_text(text + f"\n{STD_OVER_SEEDS}\n"
+                                      + "".join(f"\n- {note}" for note in notes)
                                       + ("\n" if notes else ""))
     (out_dir / "table.json").write_text(json.dumps(dict(ppo_policy=ppo_policy, rows=rows,
-                                                        notes=notes), indent=1))
+                                                        std=STD_OVER_SEEDS, notes=notes),
+                                                   indent=1))
     return text, [out_dir / "table.md", out_dir / "table.json",
                   *plot_curves(curves, evaluations, out_dir)]

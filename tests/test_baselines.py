@@ -20,7 +20,7 @@ import pytest
 import stori_jax
 from baselines import ppo
 from baselines.evaluate import evaluate, write_result
-from baselines.table import (PAPER_RESULTS, aggregate, build_table, learning_curves,
+from baselines.table import (PAPER_RESULTS, STD_OVER_SEEDS, aggregate, build_table, learning_curves,
                              load_evaluations, markdown, smoothed)
 from stori_jax import provenance
 from stori_jax.cli import main
@@ -1129,7 +1129,8 @@ def test_the_table_notes_evaluations_cut_off_at_the_frame_cap(tmp_path, capsys):
     assert table["rows"][0]["PPO"]["truncated"] == [0, 4]
     assert table["rows"][0]["Random"]["max_episode_frames"] == [None]
     written = (tmp_path / "out" / "table.md").read_text()
-    assert written == text + "".join(f"\n- {note}" for note in notes) + "\n"
+    assert written == f"{text}\n{STD_OVER_SEEDS}\n" + "".join(f"\n- {note}" for note in notes) \
+        + "\n"
     for note in notes:
         assert f"note: {note}" in err and note not in text  # printed once by stori-jax table
     write_result(dict(game="Breakout", preset="3.1", agent="ppo", policy="sampled",
@@ -1294,6 +1295,26 @@ def test_the_curves_name_the_file_a_bad_training_run_has(tmp_path, config_edit, 
                                        if episodes is None else episodes)
     with pytest.raises(ValueError, match=message):
         learning_curves(tmp_path)
+
+
+def test_two_training_runs_of_one_seed_are_refused_as_two_evaluations_are(tmp_path):
+    """A second run of a (game, preset, seed), an aborted one without an evaluation, was drawn
+    as a second "seed 0" line and pooled into the mean over seeds, without a note."""
+    for where, mean in (("final", 10.0), ("aborted", 0.0)):
+        run = tmp_path / where / "ppo-seed0"
+        run.mkdir(parents=True)
+        (run / "config.json").write_text(json.dumps(dict(game="Breakout", preset="3.1", seed=0)))
+        (run / "episodes.csv").write_text(f"global_step,env,return,length\n64,0,{mean},5\n")
+    fake_eval(tmp_path / "final", "Breakout", "3.1", "ppo", 0, 10.0)
+    with pytest.raises(ValueError, match=r"two training runs of Breakout 3\.1 seed 0: .*aborted"
+                                         r"/ppo-seed0 and .*final/ppo-seed0"):
+        build_table(tmp_path, tmp_path / "out")
+    assert not (tmp_path / "out").exists()  # refused before anything is written
+    shutil.rmtree(tmp_path / "aborted")
+    text, _ = build_table(tmp_path, tmp_path / "out")
+    written = (tmp_path / "out" / "table.md").read_text()
+    assert written.startswith(f"{text}\n{STD_OVER_SEEDS}\n\n- ") and "ddof = 1" in STD_OVER_SEEDS
+    assert json.loads((tmp_path / "out" / "table.json").read_text())["std"] == STD_OVER_SEEDS
 
 
 def test_table_joins_spellings_and_names_differing_seed_sets(tmp_path):
