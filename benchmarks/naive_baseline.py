@@ -53,6 +53,7 @@ class StoriNumpyWrapper(gym.Wrapper):
         self.start_ram = self.ale.getRAM().copy()
         self.prev_ram = self.start_ram.copy()
         self.rule_state = self.rule.new_state() if self.rule else None
+        self.carry = 0.0  # a cancelled hit's reward, taken off the next frame's (Boxing mode 2)
         self.episode_step = 0
         self.active = self._active_parts()
         return self._mask(obs), info
@@ -115,6 +116,7 @@ class StoriNumpyWrapper(gym.Wrapper):
                 for address, value in writes.items():
                     self.ale.setRAM(address, value)
             obs, reward, terminated, truncated, info = self.env.step(a)
+            reward, self.carry = reward + self.carry, 0.0
             if rule is not None and rule.post_frame is not None:
                 ram = self.ale.getRAM()
                 out = self.rule.post_frame(self.prev_ram, ram, self.start_ram, self.rule_state,
@@ -123,6 +125,8 @@ class StoriNumpyWrapper(gym.Wrapper):
                 for address, value in out.writes.items():
                     self.ale.setRAM(address, value)
                 if out.zero_reward:
+                    if out.cancel_next_reward:  # the game answers a cancelled hit next frame
+                        self.carry = reward
                     reward = 0.0
             if self.rule is not None and self.rule.post_frame is not None:  # in concept 1 too
                 self.prev_ram = self.ale.getRAM().copy()

@@ -514,6 +514,32 @@ def test_the_naive_baseline_masks_as_stori_jax_does(monkeypatch):
     assert naive.StoriNumpyWrapper._mask(wrapper, frame) is frame
 
 
+def test_the_naive_baseline_nets_a_cancelled_boxing_hit_to_zero_as_stori_jax_does(monkeypatch):
+    """Boxing event mode 2 cancels a hit and the game answers it with a negative reward on the
+    next frame, which stori-jax takes off (cancel_next_reward): the naive baseline left it in
+    (rewards of -2 and -1 at p = 1, where stori-jax's are all 0)."""
+    naive = script(monkeypatch, "naive_baseline")
+    game = stori_jax.get_game("Boxing")
+
+    def rewards(prob):
+        env = gym.make("ALE/Boxing-v5", frameskip=1, repeat_action_probability=0.0,
+                       obs_type="rgb")
+        wrapper = naive.StoriNumpyWrapper(
+            env, game=game, config=stori_jax.Config(event=stori_jax.RandomEvent(2, prob)),
+            frame_skip=4, seed=3)
+        wrapper.reset(seed=3)
+        actions, out = np.random.default_rng(0), []
+        for _ in range(600):
+            _, reward, terminated, truncated, _ = wrapper.step(int(actions.integers(18)))
+            out.append(reward)
+            assert not (terminated or truncated)
+        env.close()
+        return np.array(out)
+
+    assert (rewards(0.0) != 0).sum() >= 10  # hits land in these steps
+    assert (rewards(1.0) == 0).all()  # every one cancelled, netting 0
+
+
 class FakeAtari(gym.Env):
     """Stands in for a frameskip=1 gymnasium ALE env: frame t (from 1) has row t lit, every
     frame scores 1, and the actions played are logged."""
