@@ -3,8 +3,9 @@
 One wording and one exception type (``ValueError``, wrong type or out of range alike) for the
 whole package, so that ``make``, the configs, ``rollout``, the metrics, the PPO config, the CLI
 and the results loader describe bad input the same way.  Each check names the field and the
-allowed values, and returns the value as a plain Python number (numpy scalars and 0-d numpy or
-JAX arrays are accepted, so a sweep over ``jnp.linspace`` values works).
+allowed values, and returns the value as a plain Python number or bool (numpy scalars and 0-d
+numpy or JAX arrays, bfloat16 included, are accepted, so a sweep over ``jnp.linspace`` values
+works).
 """
 from __future__ import annotations
 
@@ -31,11 +32,24 @@ def shown(value: Any) -> str:
     return text if len(text) <= 60 else f"{text[:40]}... ({len(text)} characters)"
 
 
+def _numeric_or_bool(dtype: Any) -> bool:
+    """Whether ``dtype`` is a numpy or JAX int, float or bool dtype (bfloat16 and JAX's other
+    ml_dtypes floats included: numpy gives them the kind 'V')."""
+    kind = getattr(dtype, "kind", None)
+    if kind in ("b", "i", "u", "f"):
+        return True
+    if kind != "V":
+        return False
+    import jax.numpy as jnp  # only a JAX (ml_dtypes) scalar gets here
+
+    return bool(jnp.issubdtype(dtype, jnp.number))
+
+
 def _unwrapped(value: Any) -> Any:
-    """A 0-d numeric array (numpy or JAX) as its Python scalar; anything else unchanged."""
-    dtype = getattr(value, "dtype", None)
-    if getattr(value, "shape", None) == () and getattr(dtype, "kind", None) in ("i", "u", "f") \
-            and not isinstance(value, numbers.Number):
+    """A 0-d numeric or bool array (numpy or JAX) as its Python scalar; anything else
+    unchanged."""
+    if getattr(value, "shape", None) == () and _numeric_or_bool(getattr(value, "dtype", None)) \
+            and not isinstance(value, (numbers.Number, np.bool_)):
         try:
             return value.item()
         except Exception:  # noqa: BLE001 - a traced value has no number yet: refused below
@@ -96,8 +110,26 @@ def check_probability(name: str, value: Any) -> float:
     return prob
 
 
+DRAW_RESOLUTION = 2.0**-23  # a float32 uniform in [0, 1) is a multiple of this
+
+
+def check_draw_probability(name: str, value: Any) -> float:
+    """``value`` as a probability that a float32 uniform ``u`` plays (it fires when ``u < p``):
+    0, or in [2**-23, 1].  The draws are multiples of 2**-23, so ``p`` fires at ``p`` rounded up
+    to one (a relative excess below 2**-23 / p: 1.2e-4 at p = 0.001); a smaller positive ``p``
+    would fire at 2**-23, up to 1e5 times as often as asked, and is refused."""
+    prob = check_probability(name, value)
+    if 0 < prob < DRAW_RESOLUTION:
+        raise ValueError(f"{name} must be 0 or in [2**-23, 1] (~1.19e-07: the draws are float32 "
+                         f"uniforms, multiples of 2**-23, so a smaller probability would fire at "
+                         f"2**-23), got {prob!r}")
+    return prob
+
+
 def check_bool(name: str, value: Any) -> bool:
-    """``value`` as a bool: True or False (numpy's too), not a truthy string or number."""
+    """``value`` as a bool: True or False (numpy's, and a 0-d bool array, too), not a truthy
+    string or number."""
+    value = _unwrapped(value)
     if isinstance(value, (bool, np.bool_)):
         return bool(value)
     raise ValueError(f"{name} must be True or False, got {shown(value)}")
@@ -116,6 +148,21 @@ def check_action_indices(name: str, values: Any,
                           for a in actions):
         raise ValueError(f"{name} must be {what}, got {shown(values)}")
     return tuple(int(a) for a in actions)
+
+
+def check_dtype(name: str, array: Any, kinds: str, wanted: str) -> None:
+    """A ValueError naming ``name`` unless ``array``'s dtype is of one of numpy's ``kinds``
+    ('b' bool, 'i' 'u' ints, 'f' floats; 'B' for uint8 alone); its dtype is known inside
+    ``jit`` too, so the pure functions check it always."""
+    dtype = getattr(array, "dtype", None)
+    if dtype is None:
+        try:
+            dtype = np.asarray(array).dtype
+        except Exception:  # noqa: BLE001 - anything not array-like
+            raise ValueError(f"{name} must be an array of {wanted}, got {shown(array)}") from None
+    dtype = np.dtype(dtype)
+    if dtype.kind not in kinds and not (dtype == np.uint8 and "B" in kinds):
+        raise ValueError(f"{name} must be an array of {wanted}, got dtype {dtype}")
 
 
 def unless_traced(check, name: str, value: Any, *bounds):

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping
 
 from .checks import (MAX_INT32, check_action_indices, check_bool, check_int,
-                     check_probability, shown)
+                     check_draw_probability, shown)
 from .games import get_game
 from .games.base import CROP_MODES, is_torch
 
@@ -56,7 +56,7 @@ class ActionNoise:
     sticky: bool = False
 
     def __post_init__(self):
-        object.__setattr__(self, "prob", check_probability("ActionNoise.prob", self.prob))
+        object.__setattr__(self, "prob", check_draw_probability("ActionNoise.prob", self.prob))
         object.__setattr__(self, "sticky", check_bool("ActionNoise.sticky", self.sticky))
         if self.replacement_actions is not None:
             actions = check_action_indices(
@@ -84,7 +84,7 @@ class RandomEvent:
         object.__setattr__(self, "mode", mode)
         if mode < 1:
             raise ValueError(f"RandomEvent.mode must be >= 1 (a game's event modes), got {mode}")
-        object.__setattr__(self, "prob", check_probability("RandomEvent.prob", self.prob))
+        object.__setattr__(self, "prob", check_draw_probability("RandomEvent.prob", self.prob))
 
 
 @dataclass(frozen=True)
@@ -112,7 +112,7 @@ class ObservationMask:
             _check_choice("ObservationMask", "mode (crop)", mode, CROP_MODES)
         elif mode < 1:
             raise ValueError(f"ObservationMask.mode must be >= 1 for kind {self.kind!r}, got {mode}")
-        object.__setattr__(self, "prob", check_probability("ObservationMask.prob", self.prob))
+        object.__setattr__(self, "prob", check_draw_probability("ObservationMask.prob", self.prob))
 
 
 @dataclass(frozen=True)
@@ -170,9 +170,8 @@ class Config:
             value = getattr(self, name)
             if value is not None and not isinstance(value, cls):
                 raise ValueError(f"Config.{name} must be a {cls.__name__} or None, got {value!r}")
-        if not isinstance(self.ram_observation, bool):
-            raise ValueError(f"Config.ram_observation must be True or False, "
-                             f"got {self.ram_observation!r}")
+        object.__setattr__(self, "ram_observation",
+                           check_bool("Config.ram_observation", self.ram_observation))
         object.__setattr__(self, "granularity", _check_choice("Config", "granularity",
                                                               self.granularity, GRANULARITIES))
         if self.ram_observation and self.observation is not None:

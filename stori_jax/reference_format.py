@@ -27,7 +27,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from stori_jax.checks import check_probability
+from stori_jax.checks import check_draw_probability
 from stori_jax.config import (DRIFT_SCHEDULES, MASK_KINDS, SECONDARY_TYPES, ActionNoise, Config,
                               ConceptDrift, ObservationMask, RandomEvent)
 
@@ -155,7 +155,7 @@ def _concept(kind: str, r: _Reader) -> Config:
         prob = (r.get(f"{_OBS}.prob", _probability, "a probability")
                 if f"{_OBS}.prob" in r.flat else 1.0)
         if mode == _NO_MASK:  # the spec's "none": nothing hidden, the default game
-            check_probability("ObservationMask.prob", prob)
+            check_draw_probability("ObservationMask.prob", prob)
             return Config()
         return Config(observation=ObservationMask(kind=kind_, mode=mode, prob=prob))
     return Config()

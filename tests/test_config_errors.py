@@ -5,11 +5,14 @@ from __future__ import annotations
 import math
 import re
 
+import jax
 import numpy as np
 import pytest
 
+from stori_jax import functional as F
 from stori_jax import (ActionNoise, Config, ConceptDrift, ObservationMask, RandomEvent,
                        get_game, preset)
+from stori_jax.checks import check_probability
 
 STORI = "['Breakout', 'Boxing', 'Gopher', 'BankHeist']"
 SPEC_MODE_COUNTS = {  # blackout, RAM, event modes (STORI_SPEC sections 5-8)
@@ -210,11 +213,28 @@ def test_a_float32_probability_is_the_config_written_as_a_literal():
         assert ActionNoise(value) == ActionNoise(0.3) and ActionNoise(value).prob == 0.3
         assert ObservationMask("crop", 1, value).prob == 0.3
         assert RandomEvent(1, value).prob == 0.3
-    assert ActionNoise(np.float32(1e-8)).prob == 1e-8 and ActionNoise(np.float32(1.0)).prob == 1.0
+    assert ActionNoise(np.float32(1e-6)).prob == 1e-6 and ActionNoise(np.float32(1.0)).prob == 1.0
     assert ActionNoise(np.float16(0.3)).prob == float(np.float16(0.3))  # exact: 0.2998046875
     rare = np.array([0x15ae43fd], np.uint32).view(np.float32)[0]  # its decimal rounds up
-    assert np.float32(ActionNoise(rare).prob) == rare
+    assert np.float32(check_probability("p", rare)) == rare  # (too rare to draw: 7e-26)
     assert ActionNoise(np.float64(0.1 + 0.2)).prob == 0.1 + 0.2  # float64: as given
+
+
+@pytest.mark.parametrize("make", [
+    lambda p: ActionNoise(p), lambda p: RandomEvent(1, p), lambda p: ObservationMask("crop", 1, p),
+    lambda p: F.draw_mask_decisions(F.env_keys(jax.random.PRNGKey(0), 2), prob=p, per_frame=True,
+                                    torch=False),
+    lambda p: F.corrupt_actions(F.env_keys(jax.random.PRNGKey(0), 2), [0, 1], [0, 0], prob=p,
+                                num_slots=1, replacement=(0, 1))])
+def test_a_probability_below_the_draws_resolution_is_refused(make):
+    """The draws are float32 uniforms, multiples of 2**-23: p = 1e-12 fired at 2**-23 (~1.2e-7),
+    100,000 times as often as asked (the review's seed 674889 fired a p = 1e-12 event on the
+    first frame)."""
+    with pytest.raises(ValueError, match=r"prob must be 0 or in \[2\*\*-23, 1\] .*got 1e-12"):
+        make(1e-12)
+    make(0.0), make(2.0**-23), make(np.float32(1e-6))  # taken: 0 never fires, 2**-23 is a draw
+    u = F.event_uniforms(F.env_keys(jax.random.PRNGKey(0), 4096), 4)
+    assert (np.asarray(u) * 2**23 == np.round(np.asarray(u) * 2**23)).all()  # the resolution
 
 
 def test_a_replacement_action_named_twice_is_refused():

@@ -382,6 +382,86 @@ def test_the_pure_functions_refuse_bad_static_arguments():
                        fill=fill).shape == (4, 1, 210, 160, 3)
 
 
+def test_the_pure_functions_refuse_arrays_of_the_wrong_dtype_and_values():
+    """Each was coerced without a word: float actions truncated (1.7 played 1), an int
+    ``apply`` combined bit by bit with the mask (255 masked, 254 not, 2 nothing), a float screen
+    cast to uint16 (0.9 became black), RAM of 300 read as a score, a 3000 x 3000 image's int32
+    sums wrapped around (255 resized to 34); and concept_of gave () for a scalar step under
+    sudden and cyclic, (B,) under gradual."""
+    from stori_jax.functional import (apply_masks, atari84_frame, dreamer64, extract_labels,
+                                      region_mask, to_gray, torch_mask)
+    from stori_jax.functional.masks import CROP_REGIONS
+    from stori_jax.functional.preprocess import area_resize
+
+    keys, zeros = keys_of(0)[:4], jnp.zeros(4, jnp.int32)
+    hidden, fill = region_mask(CROP_REGIONS[1])
+    frames = jnp.full((4, 2, 210, 160, 3), 255, jnp.uint8)
+    for call, match in (
+            (lambda: corrupt_actions(keys, jnp.array([1.7, 2.9, 3.5, 0.0]), zeros, prob=0,
+                                     num_slots=1, replacement=(0, 1)),
+             r"actions must be an array of action indices .*got dtype float32"),
+            (lambda: corrupt_actions(keys, zeros, zeros.astype(bool), prob=0, num_slots=1,
+                                     sticky=True), r"prev_executed must be .*got dtype bool"),
+            (lambda: corrupt_actions(keys, zeros, zeros, prob=0, num_slots=1, sticky=True,
+                                     active=zeros), r"active must be an array of bools"),
+            (lambda: apply_masks(frames, jnp.full((4, 2), 2), hidden=hidden, fill=fill),
+             r"apply must be an array of bools \(4, 2\) .*got dtype int32"),
+            (lambda: apply_masks(frames.astype(jnp.float32), jnp.ones((4, 2), bool),
+                                 hidden=hidden, fill=fill), r"frames must be an array of uint8"),
+            (lambda: apply_masks(frames, jnp.ones((4, 2), bool), hidden=hidden.astype(int),
+                                 fill=fill), r"hidden must be an array of bools"),
+            (lambda: torch_mask(jnp.zeros((4, 2), jnp.float32)), r"centres must be .*integer"),
+            (lambda: torch_mask(jnp.zeros((4, 3), jnp.int32)), r"centres must have shape"),
+            (lambda: atari84_frame(jnp.full((1, 210, 160, 3), 0.9)), r"screen must be .*uint8"),
+            (lambda: dreamer64(jnp.zeros((1, 210, 160, 3), jnp.int32)), r"screen must be .*uint8"),
+            (lambda: to_gray(jnp.zeros((2, 3), jnp.float32)), r"rgb must be .*uint8"),
+            (lambda: area_resize(jnp.full((1, 3000, 3000), 255, jnp.uint8), 1, 1, y_axis=1,
+                                 x_axis=2), r"image is too large for area_resize's int32 sums"),
+            (lambda: extract_labels("Breakout", jnp.full((1, 128), 300, jnp.int32)),
+             r"ram must hold bytes \(values in \[0, 255\]\), got values 300\.\.300"),
+            (lambda: concept_of(keys, 1.5, "cyclic", 1),
+             r"episode_step must be an array of agent steps \(an integer dtype\)"),
+            (lambda: concept_of(keys, jnp.arange(5), "sudden", 1),
+             r"episode_step must have shape \(\) or \(B,\) .*got \(5,\)")):
+        with pytest.raises(ValueError, match=match):
+            call()
+    with pytest.raises(ValueError, match=r"apply must be an array of bools"):  # inside jit too
+        jax.jit(lambda a: apply_masks(frames, a, hidden=hidden, fill=fill))(jnp.ones((4, 2), int))
+    # what they take: int lists, any int width, the largest image the sums hold
+    assert corrupt_actions(keys, [1, 2, 3, 0], np.zeros(4, np.int64), prob=0, num_slots=1,
+                           replacement=(0, 1))[0].ravel().tolist() == [1, 2, 3, 0]
+    assert area_resize(jnp.full((1, 2000, 2000), 255, jnp.uint8), 1, 1, y_axis=1,
+                       x_axis=2).tolist() == [[[255]]]
+    assert extract_labels("Breakout", jnp.full((1, 128), 3, jnp.int32))["score"].shape == (1,)
+    # one shape, (B,), whatever the schedule, for a scalar step as for a (B,) one
+    for schedule in ("sudden", "cyclic", "gradual"):
+        assert concept_of(keys, 7, schedule, 3).shape == (4,), schedule
+        assert concept_of(keys, jnp.arange(4), schedule, 3).shape == (4,), schedule
+    assert concept_of(keys, 3, "sudden", 3).tolist() == [1] * 4
+
+
+def test_the_checks_take_bfloat16_and_0d_bool_arrays():
+    """A bfloat16 probability was refused called directly ("must be a number") but taken under
+    jit; Config.ram_observation refused np.True_, and check_bool a 0-d bool array, which every
+    other flag took."""
+    from stori_jax import Config, ObservationMask
+    from stori_jax.checks import check_bool, check_int
+    from stori_jax.functional import draw_mask_decisions
+
+    half = jnp.array(0.5, jnp.bfloat16)
+    assert ActionNoise(prob=half).prob == 0.5 and ObservationMask("crop", 1, half).prob == 0.5
+    direct = draw_mask_decisions(keys_of(0)[:64], prob=half, per_frame=True, torch=False)[0]
+    jitted = jax.jit(lambda p: draw_mask_decisions(keys_of(0)[:64], prob=p, per_frame=True,
+                                                   torch=False)[0])(half)
+    assert (direct == jitted).all()
+    assert Config(ram_observation=np.True_).ram_observation is True
+    assert check_bool("x", jnp.array(True)) is True and check_bool("x", np.array(False)) is False
+    with pytest.raises(ValueError, match="x must be True or False, got 1"):
+        check_bool("x", jnp.array(1))
+    with pytest.raises(ValueError, match="n must be an int, got True"):
+        check_int("n", jnp.array(True))
+
+
 # ---------------------------------------------------------------------------------------------
 # Keys and event uniforms
 # ---------------------------------------------------------------------------------------------

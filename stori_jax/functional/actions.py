@@ -7,8 +7,8 @@ from typing import Sequence
 import jax
 import jax.numpy as jnp
 
-from stori_jax.checks import (check_action_indices, check_bool, check_int, check_probability,
-                              unless_traced)
+from stori_jax.checks import (check_action_indices, check_bool, check_draw_probability,
+                              check_dtype, check_int, unless_traced)
 
 
 def corrupt_actions(keys: jax.Array, actions: jax.Array, prev_executed: jax.Array, *,
@@ -24,7 +24,7 @@ def corrupt_actions(keys: jax.Array, actions: jax.Array, prev_executed: jax.Arra
     marks the slots on which the channel fired (a replacement was drawn or the previous action
     repeated; a uniform replacement may equal the intended action).
     """
-    prob = unless_traced(check_probability, "prob", prob)
+    prob = unless_traced(check_draw_probability, "prob", prob)
     num_slots = check_int("num_slots", num_slots, 1)
     sticky = check_bool("sticky", sticky)
     if sticky and replacement is not None:
@@ -34,6 +34,9 @@ def corrupt_actions(keys: jax.Array, actions: jax.Array, prev_executed: jax.Arra
         replacement = check_action_indices(
             "replacement", replacement,
             "a non-empty sequence of action indices >= 0 when sticky=False")
+    for name, array in (("actions", actions), ("prev_executed", prev_executed)):
+        check_dtype(name, array, "iu", "action indices (an integer dtype; a float would be "
+                    "truncated)")
     actions = jnp.asarray(actions, jnp.int32)
     prev_executed = jnp.asarray(prev_executed, jnp.int32)
 
@@ -54,6 +57,7 @@ def corrupt_actions(keys: jax.Array, actions: jax.Array, prev_executed: jax.Arra
 
     executed, fired = jax.vmap(one_env)(keys, actions, prev_executed)
     if active is not None:
+        check_dtype("active", active, "b", "bools (B,)")
         on = jnp.asarray(active, bool)[:, None]
         executed = jnp.where(on, executed, actions[:, None])
         fired = fired & on

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -27,5 +28,9 @@ def extract_labels(game, ram) -> dict:
     if dtype.kind not in "ui" or dtype == np.int8:
         raise ValueError(f"ram must hold the RAM bytes as uint8 (or a wider integer type), got "
                          f"dtype {dtype}")
+    if dtype.itemsize > 1 and not isinstance(ram, jax.core.Tracer) and ram.size and (
+            int(ram.min()) < 0 or int(ram.max()) > 255):  # traced: no values to check yet
+        raise ValueError(f"ram must hold bytes (values in [0, 255]), got values "
+                         f"{int(ram.min())}..{int(ram.max())}")
     ram = ram.astype(jnp.int32)
     return {name: jnp.asarray(fn(ram), jnp.int32) for name, fn in game.labels.items()}

@@ -8,7 +8,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from stori_jax.checks import check_bool, check_probability, shown, unless_traced
+from stori_jax.checks import (check_bool, check_draw_probability, check_dtype, shown,
+                              unless_traced)
 from stori_jax.games.base import (CROP_REGIONS, SCREEN_HEIGHT, SCREEN_WIDTH,  # noqa: F401
                                   TORCH_MODE, TORCH_RADIUS, Region)
 
@@ -41,6 +42,10 @@ def _check_shape(name: str, array, expected: tuple) -> tuple:
 
 def torch_mask(centres: jax.Array) -> jax.Array:
     """hidden (..., 210, 160) bool: pixels farther than 75 from centre (x, y) (int32 (..., 2))."""
+    check_dtype("centres", centres, "iu", "integer pixel coordinates (x, y)")
+    if np.ndim(centres) < 1 or np.shape(centres)[-1] != 2:
+        raise ValueError(f"centres must have shape (..., 2) (x, y per torch), got "
+                         f"{tuple(np.shape(centres))}")
     cx = centres[..., 0, None, None]
     cy = centres[..., 1, None, None]
     ys = jnp.arange(SCREEN_HEIGHT, dtype=jnp.int32)[:, None]
@@ -52,7 +57,7 @@ def draw_mask_decisions(keys: jax.Array, *, prob: float, per_frame: bool, torch:
     """Per env, for the two screens that make an observation: apply? (B, 2) bool and torch
     centres (B, 2, 2) int32 (x in [0,160), y in [0,210)).  At step granularity
     (``per_frame=False``) one draw covers both screens."""
-    prob = unless_traced(check_probability, "prob", prob)
+    prob = unless_traced(check_draw_probability, "prob", prob)
     per_frame, torch = check_bool("per_frame", per_frame), check_bool("torch", torch)
     n = 2 if per_frame else 1
 
@@ -83,11 +88,16 @@ def apply_masks(frames: jax.Array, apply: jax.Array, *, hidden: np.ndarray | Non
                                          ("centres", centres))))
     b, s = _check_shape("frames", frames, ("B", "S", SCREEN_HEIGHT, SCREEN_WIDTH, 3))[:2]
     _check_shape("apply", apply, (b, s))
+    check_dtype("apply", apply, "b", f"bools ({b}, {s}) (where to mask; an int would be "
+                "combined bit by bit)")
+    check_dtype("frames", frames, "B", "uint8 RGB screens")
     if centres is not None:
         _check_shape("centres", centres, (b, s, 2))
         pixel_hidden = torch_mask(centres) & apply[:, :, None, None]
         return jnp.where(pixel_hidden[..., None], jnp.uint8(0), frames)
     _check_shape("hidden", hidden, (SCREEN_HEIGHT, SCREEN_WIDTH))
     _check_shape("fill", fill, (SCREEN_HEIGHT, SCREEN_WIDTH, 3))
+    check_dtype("hidden", hidden, "b", "bools (region_mask's first array)")
+    check_dtype("fill", fill, "B", "uint8 colours (region_mask's second array)")
     pixel_hidden = jnp.asarray(hidden)[None, None] & apply[:, :, None, None]
     return jnp.where(pixel_hidden[..., None], jnp.asarray(fill)[None, None], frames)

@@ -13,7 +13,7 @@ import functools
 import jax.numpy as jnp
 import numpy as np
 
-from stori_jax.checks import check_int
+from stori_jax.checks import MAX_INT32, check_dtype, check_int
 
 ATARI84 = 84
 STACK = 4
@@ -31,6 +31,9 @@ def max_pool(frames):
 
 def to_gray(rgb):
     """uint8 RGB (..., 3) -> uint8 luma (...,) with integer ITU-R 601 weights (77, 150, 29)/256."""
+    check_dtype("rgb", rgb, "B", "uint8 RGB (..., 3)")
+    if np.ndim(rgb) < 1 or np.shape(rgb)[-1] != 3:
+        raise ValueError(f"rgb must have shape (..., 3), got {tuple(np.shape(rgb))}")
     rgb = rgb.astype(jnp.uint16)
     return ((rgb[..., 0] * 77 + rgb[..., 1] * 150 + rgb[..., 2] * 29 + 128) >> 8).astype(jnp.uint8)
 
@@ -78,7 +81,12 @@ def area_resize(image, height: int, width: int, *, y_axis: int, x_axis: int):
     if y_axis % ndim == x_axis % ndim:
         raise ValueError(f"y_axis and x_axis must be two different axes, got {y_axis} and "
                          f"{x_axis}")
+    check_dtype("image", image, "B", "uint8 pixels")
     in_h, in_w = image.shape[y_axis], image.shape[x_axis]
+    if 255 * in_h * in_w > MAX_INT32:  # the int32 sums below would wrap around
+        raise ValueError(f"image is too large for area_resize's int32 sums: its {in_h} x {in_w} "
+                         f"pixels along (y_axis, x_axis) must number at most "
+                         f"{MAX_INT32 // 255} (255 * count < 2**31)")
     x = image.astype(jnp.int32)  # sums stay below 255 * in_h * in_w < 2**31
     x = _resize_axis(x, y_axis, height)
     x = _resize_axis(x, x_axis, width)
@@ -114,6 +122,7 @@ def _check_screens(screen) -> None:
     if np.ndim(screen) != 4 or np.shape(screen)[-1] != 3:
         raise ValueError(f"screen must have shape (B, height, width, 3) (RGB screens, e.g. "
                          f"(B, 210, 160, 3)), got {tuple(np.shape(screen))}")
+    check_dtype("screen", screen, "B", "uint8 RGB screens")
 
 
 def atari84_frame(screen):
