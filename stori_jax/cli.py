@@ -68,8 +68,11 @@ def _cmd_run(args) -> int:
           "the intended action itself)")
     print(f"concept switches  : {stats['concept_switches']}")
     print(f"masked obs        : {stats['masked_obs']} of {env_steps}")
-    print(f"env steps / s     : {stats['env_steps_per_s']:.0f} ({env_steps} steps in "
-          f"{stats['elapsed_s']:.1f} s, including compilation)")
+    rate, timed = stats["env_steps_per_s"], stats["timed_agent_steps"] * env.num_envs
+    print("env steps / s     : " + ("n/a (one agent step, which compiles: not timed)"
+                                    if rate is None else
+                                    f"{rate:.0f} ({timed} steps in {stats['elapsed_s']:.1f} s, "
+                                    "after the first agent step, which compiles)"))
     return 0
 
 

@@ -41,7 +41,9 @@ def play(env, obs, seed: int, *, max_steps: int, episodes: int | None = None,
     ``max_steps`` agent steps or until every env played its quota of ``episodes``
     (:func:`episode_quotas`; None: no quota); count what happened.  The
     returns are those of the episodes within the quotas (all of them without ``episodes``);
-    events, corruptions and masks are counted over every step played."""
+    events, corruptions and masks are counted over every step played.  The first step is not
+    timed (it compiles the env's step and the policy): ``env_steps_per_s`` is that of the steps
+    after it (None after one step)."""
     import jax
     from tqdm import tqdm
 
@@ -56,7 +58,7 @@ def play(env, obs, seed: int, *, max_steps: int, episodes: int | None = None,
     previous_concept = np.zeros(env.num_envs, np.int32)
     bar = tqdm(total=max_steps, desc=progress, unit="step", disable=progress is None,
                leave=episodes is None)
-    start = time.perf_counter()
+    start = None
     while steps < max_steps and (ended < quotas).any():
         key, k = jax.random.split(key)
         obs, _, terminated, truncated, info = env.step(policy(obs, k))
@@ -74,13 +76,17 @@ def play(env, obs, seed: int, *, max_steps: int, episodes: int | None = None,
         previous_concept = np.where(done, 0, concept)
         steps += 1
         bar.update()
+        if start is None:  # after the first step: it compiled
+            start = time.perf_counter()
     bar.close()
-    elapsed = time.perf_counter() - start
+    elapsed = time.perf_counter() - start if start is not None else 0.0
+    timed = max(steps - 1, 0)
     return dict(episodes=len(returns), mean_return=float(np.mean(returns)) if returns else None,
                 events_fired=events, corrupted_actions=corrupted, action_draws=slots,
                 corrupted_fraction=corrupted / max(slots, 1), masked_obs=masked,
                 masked_fraction=masked / max(steps * env.num_envs, 1), concept_switches=switches,
-                agent_steps=steps, env_steps_per_s=steps * env.num_envs / elapsed,
+                agent_steps=steps, timed_agent_steps=timed,
+                env_steps_per_s=timed * env.num_envs / elapsed if timed and elapsed > 0 else None,
                 elapsed_s=elapsed)
 
 
@@ -99,15 +105,19 @@ def run_preset(game: str, name: str, *, episodes: int, num_envs: int, max_steps:
 
 def table(rows: list[dict]) -> str:
     lines = ["| game | preset | definition | mean return | episodes | events fired | "
-             "corrupted actions (of draws) | masked obs | env steps/s |",
+             "corrupted actions (of draws) | masked obs | env steps/s (after the first) |",
              "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         mean = "-" if r["mean_return"] is None else f"{r['mean_return']:.1f}"
         lines.append(f"| {r['game']} | {r['preset']} | {r['definition']} | {mean} | "
                      f"{r['episodes']} | {r['events_fired']} | "
                      f"{r['corrupted_actions']} ({r['corrupted_fraction']:.0%}) | "
-                     f"{r['masked_fraction']:.0%} | {r['env_steps_per_s']:.0f} |")
+                     f"{r['masked_fraction']:.0%} | {_rate(r['env_steps_per_s'])} |")
     return "\n".join(lines) + "\n"
+
+
+def _rate(steps_per_s: float | None) -> str:
+    return "-" if steps_per_s is None else f"{steps_per_s:.0f}"
 
 
 def short_rows_note(rows: list[dict], episodes: int, num_envs: int, max_steps: int) -> str:
