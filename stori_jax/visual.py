@@ -76,7 +76,9 @@ def twin_run(game: str, config: Config, steps: int, seed: int = 0, *, with_twin:
 
     Returns a list of per-step dicts: 'twin' (None without one) and 'preset' screens
     (210, 160, 3), the intended and executed actions, and the step's perturbation flags, 'step'
-    counting the episode's agent steps."""
+    counting the episode's agent steps.  Where the twin's episode ends first (a preset that
+    changes the game: type 1, 2.1), its last screen stays from then on and 'twin_ended' says
+    at which step (None while it plays): the next step would start a new episode."""
     from tqdm import tqdm
 
     import stori_jax
@@ -93,7 +95,7 @@ def twin_run(game: str, config: Config, steps: int, seed: int = 0, *, with_twin:
     def screen(obs):  # env k's screen, if there is one
         return None if obs is None else np.asarray(obs[k])
 
-    frames = []
+    frames, twin_ended = [], None
     try:
         obs, info = env.reset()
         twin_obs = twin.reset()[0] if twin is not None else None
@@ -103,12 +105,15 @@ def twin_run(game: str, config: Config, steps: int, seed: int = 0, *, with_twin:
                 actions = random_actions(rng, env.num_actions, showcase.action_batch)[:num_envs]
                 obs, reward, terminated, truncated, info = env.step(actions)
                 # the twin gets the intended actions: without type-1 noise it plays the same game
-                twin_obs = twin.step(actions)[0] if twin is not None else None
+                if twin is not None and twin_ended is None:
+                    twin_obs, _, twin_term, twin_trunc = twin.step(actions)[:4]
+                    if t > start and bool(twin_term[k] | twin_trunc[k]):
+                        twin_ended = t - start  # its screen stays: the next is a new episode
             if t < start:
                 continue
             first = t == start  # the episode's first observation: no action made it
             frames.append(dict(
-                step=t - start, preset=screen(obs), twin=screen(twin_obs),
+                step=t - start, preset=screen(obs), twin=screen(twin_obs), twin_ended=twin_ended,
                 corrupted=not first and bool(np.asarray(info["action_corrupted"])[k].any()),
                 event=0 if first else int(np.asarray(info["event_fired"])[k]),
                 concept=0 if first else int(np.asarray(info["concept"])[k]),
@@ -258,10 +263,18 @@ def contact_sheet(game: str, name: str, config: Config, path: Path, *,
         x = pad + c * (w + pad)
         for r, key in enumerate(("twin", "preset")):
             y = title + r * (h + top + pad)
-            draw.text((x, y + 2), _caption(f) if r else f"step {f['step']}",
-                      fill=(230, 230, 120))
+            draw.text((x, y + 2), _caption(f) if r else _twin_caption(f), fill=(230, 230, 120))
             sheet.paste(Image.fromarray(f[key]), (x, y + top))
     return _save_whole(path, sheet.save)
+
+
+def _twin_caption(frame: dict) -> str:
+    """The top row's caption: the step, and where the twin's episode ended before it (its last
+    screen shown)."""
+    ended = frame.get("twin_ended")
+    if ended is None or ended == frame["step"]:
+        return f"step {frame['step']}"
+    return f"step {frame['step']} (twin's end: {ended})"
 
 
 def record_episode(game: str, name: str, config: Config, path: Path, *, max_steps: int = 1000,

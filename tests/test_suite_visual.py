@@ -235,6 +235,25 @@ def test_the_suite_plays_a_quota_of_episodes_per_env_not_the_first_to_end():
     assert stats["agent_steps"] == 20  # env 1's fourth episode ends at step 20
 
 
+def test_the_twin_row_keeps_its_last_screen_once_its_episode_ended_first():
+    """Breakout 1, seed 1: the 3.1 twin's episode ends at step 187, the preset's at 202. The
+    twin (autoreset off) then started a new episode, shown under the preset's "step 200" as if
+    it were the same moment of the same episode (score 000, 5 lives)."""
+    from stori_jax.visual import _twin_caption, twin_run
+
+    frames = twin_run("Breakout", stori_jax.preset("Breakout", "1"), 200, seed=1)
+    ended = frames[-1]["twin_ended"]
+    assert ended is not None and 0 < ended < frames[-1]["step"]
+    assert all(f["twin_ended"] is None for f in frames[:ended])
+    assert all(np.array_equal(f["twin"], frames[ended]["twin"]) for f in frames[ended:])
+    assert not np.array_equal(frames[ended - 1]["twin"], frames[ended]["twin"])
+    assert _twin_caption(frames[-1]) == f"step {frames[-1]['step']} (twin's end: {ended})"
+    assert _twin_caption(frames[ended]) == f"step {ended}"
+    # a twin that plays the preset's own game (a mask changes no game) ends with it
+    masked = twin_run("Breakout", stori_jax.preset("Breakout", "3.2A"), 60, seed=1)
+    assert all(f["twin_ended"] is None for f in masked)
+
+
 def test_the_rate_leaves_out_the_first_step_which_compiles(monkeypatch):
     """The suite's env steps/s timed the first step, which compiles the env's step and the
     policy: with short runs the column was mostly compile time (two identical runs of
