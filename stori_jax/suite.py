@@ -134,6 +134,32 @@ def short_rows_note(rows: list[dict], episodes: int, num_envs: int, max_steps: i
             "episodes are not favoured.\n")
 
 
+STAGING_PREFIX = ".suite-partial-"  # then the pid of the run that stages its sheets there
+
+
+def remove_abandoned_staging(out: Path) -> list[Path]:
+    """Remove the staging folders in ``out`` of suite runs that are gone without cleaning up
+    (killed by SIGTERM or SIGKILL, a closed terminal: only an exception or Ctrl-C removes its
+    own); a running suite's folder (its pid alive) stays."""
+    removed = []
+    for folder in sorted(Path(out).glob(f"{STAGING_PREFIX}*")):
+        pid = folder.name[len(STAGING_PREFIX):].split("-", 1)[0]
+        if folder.is_dir() and pid.isdigit() and not _alive(int(pid)):
+            shutil.rmtree(folder, ignore_errors=True)
+            removed.append(folder)
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except (ProcessLookupError, OverflowError):  # no such process; no such pid number
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
 def sheet_path(out: Path, game: str, name: str) -> Path:
     """Where a suite run in ``out`` puts the contact sheet of ``game``'s preset ``name``."""
     return out / "gallery" / f"{game}-{name}.png"
@@ -192,7 +218,8 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
     # interrupted first run no empty folder)
     with removed_if_left_empty(out):
         out.mkdir(parents=True, exist_ok=True)
-        staging = Path(tempfile.mkdtemp(dir=out, prefix=".suite-partial-"))
+        remove_abandoned_staging(out)
+        staging = Path(tempfile.mkdtemp(dir=out, prefix=f"{STAGING_PREFIX}{os.getpid()}-"))
         try:
             for game, name in tqdm(presets, desc="suite", unit="preset", disable=not progress):
                 rows.append(run_preset(game, name, episodes=episodes, num_envs=num_envs,

@@ -1,6 +1,7 @@
 """The user-facing commands: suite (table, JSON, gallery), show (contact sheet), record (GIF)."""
 
 import json
+import os
 from types import SimpleNamespace
 
 import numpy as np
@@ -105,6 +106,34 @@ def test_a_suite_run_stopped_after_some_sheets_leaves_the_earlier_run_whole(tmp_
     assert played and all(path.read_text() == "earlier" for path in earlier)
     assert sorted(p.name for p in out.rglob("*")) == ["Breakout-1.png", "gallery",
                                                       "results.json", "table.md"]
+
+
+def test_a_suite_run_removes_the_staging_folders_of_runs_killed_before_cleaning_up(tmp_path,
+                                                                                   monkeypatch):
+    """A suite killed by SIGTERM (a timeout, a scheduler, a closed terminal) runs no cleanup:
+    its hidden staging folder of half-made sheets stayed in --out for good. The next run
+    removes those of dead runs, not a running one's."""
+    import multiprocessing
+    import stori_jax.suite
+    from stori_jax.suite import STAGING_PREFIX
+
+    out = tmp_path / "suite"
+    dead = multiprocessing.get_context("spawn").Process(target=int)
+    dead.start(), dead.join()
+    abandoned = out / f"{STAGING_PREFIX}{dead.pid}-abc123"
+    live = out / f"{STAGING_PREFIX}{os.getppid()}-def456"  # this test's parent runs
+    foreign = out / f"{STAGING_PREFIX}notapid"
+    for folder in (abandoned, live, foreign):
+        (folder / "gallery").mkdir(parents=True)
+        (folder / "gallery" / "Breakout-1.png").write_text("half made")
+    monkeypatch.setattr(stori_jax.suite, "run_preset", lambda game, name, **kw: dict(
+        game=game, preset=name, definition="d", mean_return=None, episodes=0, events_fired=0,
+        corrupted_actions=0, corrupted_fraction=0.0, masked_fraction=0.0, env_steps_per_s=None))
+    stori_jax.suite.run_suite([("Breakout", "3.1")], episodes=1, num_envs=1, max_steps=1,
+                              seed=0, out=out, gallery=False, progress=False)
+    assert not abandoned.exists() and live.is_dir() and foreign.is_dir()
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        [live.name, foreign.name, "results.json", "table.md"])
 
 
 def test_an_interrupted_picture_leaves_the_earlier_file(tmp_path):
