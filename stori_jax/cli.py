@@ -183,13 +183,28 @@ def _config_for(args):
         raise ValueError(f"--config {path}: " + ("is a directory, not a JSON file"
                                                  if path.is_dir() else "no such file"))
     try:
-        reference = json.loads(path.read_text())
+        reference = json.loads(path.read_text(), object_pairs_hook=_object_without_repeats)
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise ValueError(f"--config {path} is not valid JSON: {e}") from None
+    except _RepeatedKey as e:
+        raise ValueError(f"--config {path} gives the key {e} twice in one object (JSON keeps "
+                         "the last, which would silently replace the first)") from None
     if not isinstance(reference, dict):
         raise ValueError(f"--config {path} must hold a JSON object (a reference-format "
                          f"config), got {type(reference).__name__}")
     return path.stem, stori_jax.Config.from_reference(reference, game=args.game)
+
+
+class _RepeatedKey(Exception):
+    pass
+
+
+def _object_without_repeats(pairs: list) -> dict:
+    keys = [key for key, _ in pairs]
+    for key in keys:
+        if keys.count(key) > 1:
+            raise _RepeatedKey(repr(key))
+    return dict(pairs)
 
 
 PICTURE_SUFFIX = {"show": ".png", "record": ".gif"}  # what each command writes

@@ -7,7 +7,8 @@ The reference format is a nested dict (or the same flattened with dotted keys), 
     intrinsic_stochasticity.action_independent_random.mode / .random_stochasticity_prob
     intrinsic_stochasticity.action_independent_concept_drift.temporal_mode ('sudden'|'cyclic'|'gradual'),
         .temporal_threshold, .secondary_concept_type ('1'|'2.1'|'3.2')
-    partial_observation.type ('crop'|'blackout'|'ram'), .mode, .prob
+    partial_observation.type ('crop'|'blackout'|'ram'), .mode, .prob (optional: 1.0, as
+        ObservationMask's default; every other value is required)
 
 A 2.2 config takes its secondary concept's parameters from the same dict's other sections.
 ``partial_observation.mode`` '0' is the specification's "none": a '3.2' config with it hides

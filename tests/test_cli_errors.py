@@ -20,6 +20,9 @@ def files(tmp_path):
     (tmp_path / "adir").mkdir()
     (tmp_path / "bad.json").write_text("{not json")
     (tmp_path / "list.json").write_text("[1, 2]")
+    (tmp_path / "twice.json").write_text(  # the second section replaced the first, prob too
+        '{"stochasticity_type": "3.2", "partial_observation": {"type": "crop", "mode": "1", '
+        '"prob": 1.0}, "partial_observation": {"type": "blackout", "mode": "10"}}')
     (tmp_path / "empty.pkl").write_bytes(b"")
     (tmp_path / "text.pkl").write_text("garbage\n")
     (tmp_path / "list.pkl").write_bytes(pickle.dumps([1, 2]))
@@ -53,6 +56,8 @@ def run_main(argv, files, capsys):
     (["record", "Breakout", "--config", "D/adir"], "--config D/adir: is a directory"),
     (["show", "Breakout", "--config", "D/bad.json"], "--config D/bad.json is not valid JSON"),
     (["show", "Breakout", "--config", "D/list.json"], "must hold a JSON object"),
+    (["record", "Breakout", "--config", "D/twice.json"],
+     "--config D/twice.json gives the key 'partial_observation' twice in one object"),
 ])
 def test_config_file_errors_name_the_file(argv, message, files, capsys):
     assert message in run_main(argv, files, capsys)

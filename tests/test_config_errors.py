@@ -428,6 +428,15 @@ def test_reference_missing_key(d, missing):
         Config.from_reference(nested)
 
 
+def test_reference_mask_prob_is_the_one_optional_value():
+    """A left-out partial_observation.prob is ObservationMask's default, 1.0 (as documented);
+    every other value the type reads is required (test_reference_missing_key)."""
+    loaded = Config.from_reference({"stochasticity_type": "3.2", "partial_observation.type":
+                                    "blackout", "partial_observation.mode": "10"},
+                                   game="BankHeist")
+    assert loaded.observation == ObservationMask("blackout", 10, 1.0)
+
+
 @pytest.mark.parametrize("key,value,what", [
     (f"{IS}.action_dependent.stochastic_action_prob", "abc", "a probability"),
     (f"{IS}.action_dependent.stochastic_action_prob", None, "a probability"),
