@@ -136,7 +136,7 @@ def selected_presets(games, presets):
 
 def _cmd_suite(args) -> int:
     from stori_jax.env import FRAME_SKIP, check_memory
-    from stori_jax.suite import run_suite
+    from stori_jax.suite import default_out, run_suite
 
     for name, value in (("--episodes", args.episodes), ("--num-envs", args.num_envs),
                         ("--max-steps", args.max_steps)):
@@ -144,7 +144,10 @@ def _cmd_suite(args) -> int:
     if args.seed is not None:
         check_int("--seed", args.seed, 0, MAX_SEED)
     check_memory(args.num_envs, FRAME_SKIP, flag="--num-envs")  # before any preset runs
-    if args.out is not None:
+    if args.out is None:  # the default is checked as a given --out is
+        args.out = default_out()
+        check_out("--out (default)", args.out, directory=True)
+    else:
         check_out("--out", args.out, directory=True)
     games, seed = args.games, 0 if args.seed is None else args.seed
     if args.checkpoint is not None:  # a checkpoint plays its own game, on eval's seed

@@ -184,6 +184,11 @@ def remove_stale_outputs(out: Path, written: list[Path]) -> list[Path]:
     return stale
 
 
+def default_out() -> Path:
+    """Where a suite run writes without --out: results/suite-<today>."""
+    return Path("results") / f"suite-{datetime.date.today().isoformat()}"
+
+
 def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: int,
               out: Path | None, gallery: bool, progress: bool = True,
               checkpoint: Path | None = None) -> Path:
@@ -197,7 +202,7 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
     from stori_jax.visual import contact_sheet
 
     made_with = software()  # when the run starts
-    out = Path(out) if out else Path("results") / f"suite-{datetime.date.today().isoformat()}"
+    out = Path(out) if out else default_out()
     policy = agent = None
     if checkpoint is not None:
         from baselines.evaluate import EVAL_SEED_OFFSET, check_eval_seed

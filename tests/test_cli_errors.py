@@ -81,6 +81,15 @@ def test_unusable_out_paths_are_refused_up_front(argv, message, files, capsys):
     assert message in run_main(argv, files, capsys)
 
 
+def test_the_suites_default_out_is_checked_as_a_given_one(files, capsys, monkeypatch):
+    """With ./results a file, the default --out failed with a bare "[Errno 20] Not a
+    directory" that named no flag."""
+    monkeypatch.chdir(files)
+    (files / "results").write_text("a file")
+    err = run_main(["suite", "--games", "Breakout", "--presets", "3.1", "--quiet"], files, capsys)
+    assert "--out (default) results/suite-" in err and "results is a file, not a directory" in err
+
+
 @pytest.mark.parametrize("name, why", [
     ("empty.pkl", "unreadable: EOFError"),
     ("bad.json", "unreadable: UnpicklingError"),
