@@ -154,7 +154,8 @@ def test_envs_of_a_batch_are_independent_of_the_batch_size(name):
 
 def draws_digest() -> str:
     """sha256 of short runs whose every draw kind is on: type-1 replacement per frame with
-    no-op starts, torch centres, gradual drift over sticky actions (obs, rewards and infos)."""
+    no-op starts, torch centres, gradual drift over sticky actions, event uniforms (obs, RAM,
+    rewards and infos)."""
     import hashlib
 
     from stori_jax import ConceptDrift
@@ -164,6 +165,7 @@ def draws_digest() -> str:
         dict(game="Breakout", obs="raw", config=Config(observation=ObservationMask("crop", 5, 0.5))),
         dict(game="Boxing", config=Config(drift=ConceptDrift("gradual", 2, Config(
             action_noise=ActionNoise(0.5, sticky=True))))),
+        dict(game="Boxing", obs="ram", config=Config(event=RandomEvent(3, 0.3))),
     ]
     digest = hashlib.sha256()
     for case in cases:
@@ -171,7 +173,7 @@ def draws_digest() -> str:
         with make(game, seed=3, **case) as env:
             run = run_env(env, random_actions(env.num_actions, 8, 2, seed=1))
         for name in ("obs", "reward", "executed_action", "action_corrupted", "obs_masked",
-                     "concept"):
+                     "concept", "event_fired"):
             values = run.stacked(name)
             digest.update(f"{name} {values.dtype}".encode() + values.tobytes())
     return digest.hexdigest()
