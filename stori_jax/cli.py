@@ -71,7 +71,7 @@ def _cmd_run(args) -> int:
     rate, timed = stats["env_steps_per_s"], stats["timed_agent_steps"] * env.num_envs
     print("env steps / s     : " + ("n/a (one agent step, which compiles: not timed)"
                                     if rate is None else
-                                    f"{rate:.0f} ({timed} steps in {stats['elapsed_s']:.1f} s, "
+                                    f"{rate:.0f} ({timed} steps in {stats['elapsed_s']:.3g} s, "
                                     "after the first agent step, which compiles)"))
     return 0
 
@@ -114,13 +114,11 @@ def selected_presets(games, presets):
     """The paper's (game, preset) pairs that ``--games`` and ``--presets`` choose (None: all);
     a ValueError naming the flag for an unknown game or a preset none of the games has."""
     from stori_jax import list_presets
-    from stori_jax.presets import preset as check_preset
-    from stori_jax.presets import spelt_as_the_paper
+    from stori_jax.presets import canonical_game, spelt_as_the_paper
 
-    for g in games or []:
-        check_preset(g, "3.1")  # unknown game -> ValueError naming the allowed ones
-    in_games = [(g, n) for g, n in list_presets()
-                if not games or g.lower() in {x.lower() for x in games}]
+    # an unknown game -> a ValueError naming the allowed ones; 'bank_heist' -> 'BankHeist'
+    wanted = {canonical_game(g) for g in games or []}
+    in_games = [(g, n) for g, n in list_presets() if not games or g in wanted]
     allowed = list(dict.fromkeys(n for _, n in in_games))
     unknown = [n for n in presets or [] if spelt_as_the_paper(n) not in allowed]
     if unknown:

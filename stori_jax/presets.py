@@ -60,7 +60,9 @@ def list_presets() -> list[tuple[str, str]]:
     return list(_PRESETS)
 
 
-def _canonical_game(game: str) -> str:
+def canonical_game(game: str) -> str:
+    """``game`` spelt as the paper does ('breakout', 'bank_heist' -> 'Breakout', 'BankHeist'); a
+    ValueError for a game without presets."""
     from stori_jax.games import stori_spec_named
 
     spec = stori_spec_named(game)  # every spelling make() and get_game() accept ('bank_heist')
@@ -80,7 +82,7 @@ def spelt_as_the_paper(name: str) -> str:
 def canonical_preset(game: str, name: str) -> str:
     """Preset ``name`` of ``game`` spelt as the paper does ("3.2a" -> "3.2A"), as game names
     are matched whatever their case; an unknown one is a ValueError naming the allowed ones."""
-    game = _canonical_game(game)
+    game = canonical_game(game)
     names = [n for g, n in _PRESETS if g == game]
     if not isinstance(name, str):
         raise ValueError(f"preset must be a name (a string) of {game}: allowed {names}, got "
@@ -92,11 +94,11 @@ def canonical_preset(game: str, name: str) -> str:
 
 def preset(game: str, name: str) -> Config:
     """The Config of paper preset ``name`` of ``game``, e.g. preset("Breakout", "3.2A")."""
-    game = _canonical_game(game)
+    game = canonical_game(game)
     return _PRESETS[(game, canonical_preset(game, name))][1].for_game(game)
 
 
 def describe_preset(game: str, name: str) -> str:
     """The paper's definition of a preset, in words."""
-    game = _canonical_game(game)
+    game = canonical_game(game)
     return _PRESETS[(game, canonical_preset(game, name))][0]

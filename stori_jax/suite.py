@@ -8,6 +8,7 @@ import datetime
 import json
 import os
 import shutil
+import socket
 import sys
 import tempfile
 import time
@@ -134,17 +135,23 @@ def short_rows_note(rows: list[dict], episodes: int, num_envs: int, max_steps: i
             "episodes are not favoured.\n")
 
 
-STAGING_PREFIX = ".suite-partial-"  # then the pid of the run that stages its sheets there
+STAGING_PREFIX = ".suite-partial-"  # then <pid>@<host>- of the run that stages its sheets
+
+
+def _run_id() -> str:
+    """This process as a staging folder names it: its pid and its machine."""
+    return f"{os.getpid()}@{socket.gethostname().replace('-', '_')}"
 
 
 def remove_abandoned_staging(out: Path) -> list[Path]:
-    """Remove the staging folders in ``out`` of suite runs that are gone without cleaning up
-    (killed by SIGTERM or SIGKILL, a closed terminal: only an exception or Ctrl-C removes its
-    own); a running suite's folder (its pid alive) stays."""
-    removed = []
+    """Remove the staging folders in ``out`` of suite runs of this machine that are gone
+    without cleaning up (killed by SIGTERM or SIGKILL, a closed terminal: only an exception or
+    Ctrl-C removes its own).  A running suite's folder (its pid alive) stays, and so does
+    another machine's (its pids mean nothing here), or one named otherwise."""
+    removed, host = [], _run_id().split("@", 1)[1]
     for folder in sorted(Path(out).glob(f"{STAGING_PREFIX}*")):
-        pid = folder.name[len(STAGING_PREFIX):].split("-", 1)[0]
-        if folder.is_dir() and pid.isdigit() and not _alive(int(pid)):
+        pid, _, machine = folder.name[len(STAGING_PREFIX):].rpartition("-")[0].partition("@")
+        if folder.is_dir() and pid.isdigit() and machine == host and not _alive(int(pid)):
             shutil.rmtree(folder, ignore_errors=True)
             removed.append(folder)
     return removed
@@ -224,7 +231,7 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
     with removed_if_left_empty(out):
         out.mkdir(parents=True, exist_ok=True)
         remove_abandoned_staging(out)
-        staging = Path(tempfile.mkdtemp(dir=out, prefix=f"{STAGING_PREFIX}{os.getpid()}-"))
+        staging = Path(tempfile.mkdtemp(dir=out, prefix=f"{STAGING_PREFIX}{_run_id()}-"))
         try:
             for game, name in tqdm(presets, desc="suite", unit="preset", disable=not progress):
                 rows.append(run_preset(game, name, episodes=episodes, num_envs=num_envs,

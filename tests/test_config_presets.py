@@ -102,6 +102,12 @@ def test_a_game_spelt_as_its_ale_id_takes_a_preset_everywhere():
         env.close()
     assert main(["run", "bank_heist", "2.1", "--steps", "2", "--num-envs", "1",
                  "--num-workers", "0", "--quiet"]) == 0
+    from stori_jax.cli import selected_presets  # suite --games bank_heist found no preset
+
+    assert selected_presets(["bank_heist", "breakout"], ["1"]) == [("Breakout", "1"),
+                                                                   ("BankHeist", "1")]
+    with pytest.raises(ValueError, match=r"--presets: unknown \['9'\]; allowed for BankHeist"):
+        selected_presets(["bank_heist"], ["9"])
     with pytest.raises(ValueError, match="unknown game 'pong' for presets"):
         preset("pong", "1")
 

@@ -415,14 +415,16 @@ def test_the_pure_functions_refuse_arrays_of_the_wrong_dtype_and_values():
             (lambda: atari84_frame(jnp.full((1, 210, 160, 3), 0.9)), r"screen must be .*uint8"),
             (lambda: dreamer64(jnp.zeros((1, 210, 160, 3), jnp.int32)), r"screen must be .*uint8"),
             (lambda: to_gray(jnp.zeros((2, 3), jnp.float32)), r"rgb must be .*uint8"),
-            (lambda: area_resize(jnp.full((1, 3000, 3000), 255, jnp.uint8), 1, 1, y_axis=1,
+            (lambda: area_resize(jnp.full((1, 2900, 2900), 255, jnp.uint8), 1, 1, y_axis=1,
                                  x_axis=2), r"image is too large for area_resize's int32 sums"),
             (lambda: extract_labels("Breakout", jnp.full((1, 128), 300, jnp.int32)),
              r"ram must hold bytes \(values in \[0, 255\]\), got values 300\.\.300"),
             (lambda: concept_of(keys, 1.5, "cyclic", 1),
              r"episode_step must be an array of agent steps \(an integer dtype\)"),
             (lambda: concept_of(keys, jnp.arange(5), "sudden", 1),
-             r"episode_step must have shape \(\) or \(B,\) .*got \(5,\)")):
+             r"concept_of takes keys \(B,\) .*got keys \(4, 2\) and episode_step \(5,\)"),
+            (lambda: concept_of(jnp.zeros((2, 2, 2), jnp.uint32), 1, "sudden", 1),
+             r"got keys \(2, 2, 2\)")):
         with pytest.raises(ValueError, match=match):
             call()
     with pytest.raises(ValueError, match=r"apply must be an array of bools"):  # inside jit too
@@ -430,13 +432,20 @@ def test_the_pure_functions_refuse_arrays_of_the_wrong_dtype_and_values():
     # what they take: int lists, any int width, the largest image the sums hold
     assert corrupt_actions(keys, [1, 2, 3, 0], np.zeros(4, np.int64), prob=0, num_slots=1,
                            replacement=(0, 1))[0].ravel().tolist() == [1, 2, 3, 0]
-    assert area_resize(jnp.full((1, 2000, 2000), 255, jnp.uint8), 1, 1, y_axis=1,
-                       x_axis=2).tolist() == [[[255]]]
+    assert area_resize(jnp.full((1, 2898, 2898), 255, jnp.uint8), 1, 1, y_axis=1,
+                       x_axis=2).tolist() == [[[255]]]  # 2900 x 2900's rounding wrapped to 0
     assert extract_labels("Breakout", jnp.full((1, 128), 3, jnp.int32))["score"].shape == (1,)
     # one shape, (B,), whatever the schedule, for a scalar step as for a (B,) one
+    # (one concept per env for raw or typed keys, and per key when vmapped over single envs,
+    # as a gymnax-style env written for one env is)
+    typed = jax.random.split(jax.random.key(0), 4)
     for schedule in ("sudden", "cyclic", "gradual"):
-        assert concept_of(keys, 7, schedule, 3).shape == (4,), schedule
-        assert concept_of(keys, jnp.arange(4), schedule, 3).shape == (4,), schedule
+        for batch in (keys, typed):
+            assert concept_of(batch, 7, schedule, 3).shape == (4,), schedule
+            assert concept_of(batch, jnp.arange(4), schedule, 3).shape == (4,), schedule
+            one_by_one = jax.vmap(lambda k, s: concept_of(k, s, schedule, 3))(batch, jnp.arange(4))
+            np.testing.assert_array_equal(one_by_one, concept_of(batch, jnp.arange(4), schedule, 3))
+            assert concept_of(batch[0], 5, schedule, 3).shape == ()
     assert concept_of(keys, 3, "sudden", 3).tolist() == [1] * 4
 
 

@@ -115,15 +115,18 @@ def test_a_suite_run_removes_the_staging_folders_of_runs_killed_before_cleaning_
     removes those of dead runs, not a running one's."""
     import multiprocessing
     import stori_jax.suite
-    from stori_jax.suite import STAGING_PREFIX
+    from stori_jax.suite import STAGING_PREFIX, _run_id
 
     out = tmp_path / "suite"
     dead = multiprocessing.get_context("spawn").Process(target=int)
     dead.start(), dead.join()
-    abandoned = out / f"{STAGING_PREFIX}{dead.pid}-abc123"
-    live = out / f"{STAGING_PREFIX}{os.getppid()}-def456"  # this test's parent runs
+    host = _run_id().split("@")[1]
+    abandoned = out / f"{STAGING_PREFIX}{dead.pid}@{host}-abc123"
+    live = out / f"{STAGING_PREFIX}{os.getpid()}@{host}-def456"  # this process runs
+    elsewhere = out / f"{STAGING_PREFIX}{dead.pid}@another_machine-a_b1"  # its pids: not ours
     foreign = out / f"{STAGING_PREFIX}notapid"
-    for folder in (abandoned, live, foreign):
+    folders = (abandoned, live, elsewhere, foreign)
+    for folder in folders:
         (folder / "gallery").mkdir(parents=True)
         (folder / "gallery" / "Breakout-1.png").write_text("half made")
     monkeypatch.setattr(stori_jax.suite, "run_preset", lambda game, name, **kw: dict(
@@ -131,9 +134,9 @@ def test_a_suite_run_removes_the_staging_folders_of_runs_killed_before_cleaning_
         corrupted_actions=0, corrupted_fraction=0.0, masked_fraction=0.0, env_steps_per_s=None))
     stori_jax.suite.run_suite([("Breakout", "3.1")], episodes=1, num_envs=1, max_steps=1,
                               seed=0, out=out, gallery=False, progress=False)
-    assert not abandoned.exists() and live.is_dir() and foreign.is_dir()
+    assert not abandoned.exists() and all(folder.is_dir() for folder in folders[1:])
     assert sorted(p.name for p in out.iterdir()) == sorted(
-        [live.name, foreign.name, "results.json", "table.md"])
+        [folder.name for folder in folders[1:]] + ["results.json", "table.md"])
 
 
 def test_an_interrupted_picture_leaves_the_earlier_file(tmp_path):

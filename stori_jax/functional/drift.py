@@ -25,16 +25,20 @@ def concept2_probability(episode_step: jax.Array, schedule: str, period: int) ->
 
 
 def concept_of(keys: jax.Array, episode_step: jax.Array, schedule: str, period: int) -> jax.Array:
-    """(B,) int32 concept index (0 = concept 1 default, 1 = concept 2) for this step, from
-    ``keys`` (B,) and ``episode_step``, each env's (B,) or one for all (a scalar)."""
-    if np.ndim(keys) < 1 or np.ndim(episode_step) not in (0, 1) or (
-            np.ndim(episode_step) == 1 and np.shape(episode_step)[0] != np.shape(keys)[0]):
-        raise ValueError(f"episode_step must have shape () or (B,) for keys of shape (B, ...), "
-                         f"got {tuple(np.shape(episode_step))} and keys "
-                         f"{tuple(np.shape(keys))}")
-    p2 = jnp.broadcast_to(concept2_probability(episode_step, schedule, period),
-                          np.shape(keys)[:1])
+    """int32 concept index (0 = concept 1 default, 1 = concept 2) for this step, one per key:
+    (B,) for ``keys`` (B,) (a batch of typed keys, or (B, 2) raw uint32 ones), () for a single
+    key (one env, e.g. under ``jax.vmap``); ``episode_step`` is each env's or one for all (a
+    scalar)."""
+    typed = jax.dtypes.issubdtype(keys.dtype, jax.dtypes.prng_key)
+    batch = tuple(np.shape(keys)) if typed else tuple(np.shape(keys))[:-1]
+    if len(batch) > 1 or np.shape(episode_step) not in ((), batch):
+        raise ValueError(f"concept_of takes keys (B,) (raw: (B, 2)) or one key, and an "
+                         f"episode_step of shape () or the keys' (B,): got keys "
+                         f"{tuple(np.shape(keys))} and episode_step "
+                         f"{tuple(np.shape(episode_step))}")
+    p2 = jnp.broadcast_to(concept2_probability(episode_step, schedule, period), batch)
     if schedule == "gradual":
-        u = jax.vmap(lambda k: jax.random.uniform(k, (), jnp.float32))(keys)
+        draw = lambda k: jax.random.uniform(k, (), jnp.float32)  # noqa: E731
+        u = jax.vmap(draw)(keys) if batch else draw(keys)
         return (u < p2).astype(jnp.int32)
     return p2.astype(jnp.int32)

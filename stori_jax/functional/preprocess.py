@@ -83,14 +83,15 @@ def area_resize(image, height: int, width: int, *, y_axis: int, x_axis: int):
                          f"{x_axis}")
     check_dtype("image", image, "B", "uint8 pixels")
     in_h, in_w = image.shape[y_axis], image.shape[x_axis]
-    if 255 * in_h * in_w > MAX_INT32:  # the int32 sums below would wrap around
+    count = in_h * in_w
+    if 255 * count + count // 2 > MAX_INT32:  # the int32 sums below would wrap around
         raise ValueError(f"image is too large for area_resize's int32 sums: its {in_h} x {in_w} "
                          f"pixels along (y_axis, x_axis) must number at most "
-                         f"{MAX_INT32 // 255} (255 * count < 2**31)")
-    x = image.astype(jnp.int32)  # sums stay below 255 * in_h * in_w < 2**31
+                         f"{MAX_INT32 * 2 // 511} (255 * count + count // 2 < 2**31)")
+    x = image.astype(jnp.int32)  # sums, rounding included, stay below 2**31 (checked above)
     x = _resize_axis(x, y_axis, height)
     x = _resize_axis(x, x_axis, width)
-    denominator = in_h * in_w
+    denominator = count
     return ((x + denominator // 2) // denominator).astype(jnp.uint8)
 
 
