@@ -462,6 +462,32 @@ def test_resume_reproduces_the_uninterrupted_run(uninterrupted, tmp_path):
                        (b["params"], b["opt_state"], b["key"], b["obs"]))
 
 
+def test_resume_after_a_crash_between_checkpoints_drops_the_rows_it_trains_again(
+        uninterrupted, tmp_path, monkeypatch):
+    """A run that dies after logging an iteration but before checkpointing it (every 2nd
+    iteration here): its log is one row ahead of its checkpoint. Resuming trains that iteration
+    again, and the log and episodes must hold it once, as the uninterrupted run's do (every
+    other resume test checkpointed at its last logged row)."""
+    full, _ = uninterrupted
+    save, saved = ppo.save_checkpoint, []
+
+    def dies_at_the_second_save(path, payload):  # iteration 3's rows logged, never saved
+        saved.append(payload["iteration"])
+        if len(saved) == 2:
+            raise KeyboardInterrupt
+        save(path, payload)
+
+    monkeypatch.setattr(ppo, "save_checkpoint", dies_at_the_second_save)
+    with pytest.raises(KeyboardInterrupt):
+        ppo.train(tiny(checkpoint_every=2), tmp_path, progress=False)
+    monkeypatch.setattr(ppo, "save_checkpoint", save)
+    assert saved == [2, 3] and read_checkpoint(tmp_path)["iteration"] == 2
+    assert len(read_log(tmp_path)) == 3  # one row past the checkpoint
+    ppo.train(tiny(checkpoint_every=2), tmp_path, resume=True, progress=False)
+    assert read_log(tmp_path) == read_log(full)
+    assert (tmp_path / "episodes.csv").read_text() == (full / "episodes.csv").read_text()
+
+
 def test_a_resumed_run_records_each_parts_software_and_warns_when_it_changed(
         uninterrupted, tmp_path, monkeypatch):
     """A resumed run's summary named only its last part's software; a part trained with other

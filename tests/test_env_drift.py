@@ -51,6 +51,10 @@ def test_sudden_drift_to_blackout_switches_at_step_T_and_restarts_each_episode()
     np.testing.assert_array_equal(obs[masked][:, ~hidden], twin_obs[masked][:, ~hidden])
     assert not obs[masked][:, hidden].any()
     np.testing.assert_array_equal(ev.reset_obs, twin.reset_obs)
+    # no no-ops: the next episode's first screen is the first episode's (the twin would show
+    # the old episode's last screen too, were both wrong alike)
+    for k in np.nonzero(truncated[:, 0])[0]:
+        np.testing.assert_array_equal(obs[k], ev.reset_obs, err_msg=f"step {k}")
 
 
 def test_cyclic_drift_to_a_ram_obs_mode_alternates_every_T_steps():
@@ -94,6 +98,14 @@ def test_drift_to_action_noise_restarts_after_autoreset():
     executed = run.stacked("executed_action")
     assert (executed[concept == 0] == NOOP).all()
     assert (executed[concept == 1] != NOOP).any()
+    # what the emulators played, not only what info reports: the reported actions, replayed
+    # without noise, give the same game frame for frame
+    plain = make("Breakout", Config(granularity="step"), max_episode_frames=32)
+    try:
+        replay = run_env(plain, executed)
+    finally:
+        plain.close()
+    np.testing.assert_array_equal(run.ram, replay.ram)
 
 
 def test_drift_to_an_event_keeps_the_episode_start_ram():

@@ -179,6 +179,9 @@ def test_episode_statistics_and_frame_stack_restart_at_each_autoreset():
         for b in range(2):
             frames = obs[k, b]
             assert all((frames[..., i] == frames[..., 0]).all() for i in range(4)), (k, b)
+        # without no-ops every episode starts as the first did: the NEW episode's first screen
+        # (one frame four times would hold for the old episode's last screen too)
+        np.testing.assert_array_equal(obs[k], run.reset_obs, err_msg=f"step {k}")
     assert not returns[~done].any()
     # engaged: an episode before the last scored, so a return carried over would show; the
     # stack mid-episode holds different frames, so a stack carried over would show

@@ -960,6 +960,8 @@ def test_a_batch_split_unevenly_between_workers_plays_the_one_worker_run():
     with make("Breakout", preset="1", num_envs=3, num_workers=2, inline_envs=0) as split, \
             make("Breakout", preset="1", num_envs=3, num_workers=1, inline_envs=0) as whole:
         got, expected = run_env(split, actions), run_env(whole, actions)
+        # the seeds themselves (ALE's random state, which play alone need not show)
+        assert emulator_states(split) == emulator_states(whole)
     np.testing.assert_array_equal(got.ram, expected.ram)
     np.testing.assert_array_equal(got.stacked("reward"), expected.stacked("reward"))
     assert len({bytes(r) for r in got.ram[-1]}) == 3  # three emulators of their own

@@ -40,8 +40,10 @@ def assert_same(a, b):
 
 # episodes of 20 agent steps (max_episode_frames 80): autoresets inside the scan
 CASES = {
-    "Breakout 2.2 (drift to a blackout), atari84": dict(game="Breakout", preset="2.2",
-                                                        obs="atari84"),
+    # (2.2's T = 300 is never reached in episodes of 20 steps: a cyclic T = 3 switches in each)
+    "Breakout cyclic drift to a blackout, atari84": dict(game="Breakout", config=Config(
+        drift=stori_jax.ConceptDrift("cyclic", 3, Config(
+            observation=stori_jax.ObservationMask("blackout", 1, 1.0)))), obs="atari84"),
     "Breakout 2.1 (events), autoreset=False": dict(game="Breakout", preset="2.1", obs="raw",
                                                    autoreset=False),
     "Boxing 3.2C (RAM-obs render), raw": dict(game="Boxing", preset="3.2C", obs="raw"),
@@ -67,6 +69,8 @@ def test_a_scan_over_the_xla_step_is_env_step_bit_for_bit(case):
         handle, got = scan(step, handle, actions)
         assert int(handle.steps) == steps
     assert (expected[2] | expected[3]).sum() >= 4, "the run should cross episode ends"
+    if "drift" in case:  # both concepts played, and the counter restarted at the autoresets
+        assert expected[4]["concept"].any() and not expected[4]["concept"].all()
     assert_same(to_numpy(got), expected)
 
 
