@@ -27,6 +27,7 @@ import re
 import shlex
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -99,6 +100,12 @@ def run_readme_example(text: str, path: str = str(README)) -> dict:
         assert not missing, f"README names env attributes the env lacks: {missing}"
         assert env.single_observation_space.shape == env.observation_space.shape[1:]
         assert traj.last_obs.shape == env.observation_space.shape
+        # the first reset's comment: the shape and dtype the Breakout env's observations have
+        shown = re.search(r"# obs \(([\d, ]+)\) (\w+)", block)
+        assert shown, "README's '# obs (shape) dtype' comment was not found"
+        obs = namespace["obs"]  # the last reset's (seed=3), of that same env
+        assert tuple(int(n) for n in shown.group(1).split(",")) == obs.shape
+        assert np.dtype(shown.group(2)) == obs.dtype
     finally:
         for value in list(namespace.values()):
             if type(value).__name__ == "Env" and hasattr(value, "close"):

@@ -23,16 +23,22 @@ def test_software_names_the_packages_and_the_code():
         assert found["commit"] is None
 
 
+# every kind of tracked file: code (stori_jax, envpool_bridge, baselines, benchmarks,
+# pyproject.toml), whose change makes the commit '+dirty', and results and docs, which do not
+CODE_FILES = ("stori_jax/core.py", "envpool_bridge/__init__.py", "baselines/ppo.py",
+              "benchmarks/throughput.py", "pyproject.toml")
+NOT_CODE_FILES = ("baselines/results/table.json", "benchmarks/results/run.json", "README.md",
+                  "baselines/README.md", "stori_jax/notes.md")
+CHECKOUT_FILES = CODE_FILES + NOT_CODE_FILES
+
+
 @pytest.fixture
 def checkout(tmp_path, monkeypatch):
     """A git checkout holding a stori_jax folder, standing in for this package's."""
     package = tmp_path / "repo" / "stori_jax"
-    package.mkdir(parents=True)
-    (package / "core.py").write_text("x = 1\n")
-    results = tmp_path / "repo" / "baselines" / "results"
-    results.mkdir(parents=True)
-    (results / "table.json").write_text("{}\n")
-    (tmp_path / "repo" / "README.md").write_text("docs\n")
+    for name in CHECKOUT_FILES:
+        (package.parent / name).parent.mkdir(parents=True, exist_ok=True)
+        (package.parent / name).write_text("1\n")
     monkeypatch.setattr(provenance, "PACKAGE_DIR", package.resolve())
     if shutil.which("git") is None:
         return None
@@ -52,11 +58,14 @@ def test_the_commit_is_the_checkouts_and_says_when_tracked_files_changed(checkou
     package, head = checkout
     assert provenance.code_commit() == head
     (package / "notes.txt").write_text("untracked files do not count\n")
-    (package.parent / "baselines" / "results" / "table.json").write_text("[]\n")
-    (package.parent / "README.md").write_text("results and docs are not the code\n")
-    assert provenance.code_commit() == head
-    (package / "core.py").write_text("x = 2\n")
-    assert provenance.code_commit() == head + "+dirty"
+    for name in NOT_CODE_FILES:  # results and docs are not the code
+        (package.parent / name).write_text("2\n")
+        assert provenance.code_commit() == head, name
+    for name in CODE_FILES:  # each alone marks the commit dirty
+        subprocess.run(["git", "-C", str(package.parent), "checkout", "-q", "--", "."],
+                       check=True)
+        (package.parent / name).write_text("2\n")
+        assert provenance.code_commit() == head + "+dirty", name
 
 
 def test_a_package_outside_its_own_checkout_has_no_commit(tmp_path, monkeypatch):

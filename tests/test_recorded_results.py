@@ -194,6 +194,100 @@ def test_the_million_step_readme_shows_the_committed_onset():
     assert _rows_missing_from(OUT / "README.md", OUT / "onset.md") == []
 
 
+RECORDED_EVALUATIONS = sorted((ROOT / "baselines" / "results").rglob("eval-*.json"))
+
+
+@pytest.mark.parametrize("path", RECORDED_EVALUATIONS, ids=lambda p: str(p.relative_to(ROOT)))
+def test_a_recorded_evaluations_numbers_are_its_own_episodes(path):
+    """The table reads each evaluation's mean_return, the replays check only each env's first
+    episode: an episode's return edited in the file would pass both unless its mean and std
+    are what the file's own returns give."""
+    e = json.loads(path.read_text())
+    returns = np.asarray(e["returns"], np.float64)
+    assert len(e["returns"]) == len(e["lengths"]) == e["episodes"]
+    assert e["mean_return"] == float(np.mean(returns))
+    assert e["std_return"] == pytest.approx(float(np.std(returns)), rel=1e-12, abs=1e-12)
+
+
+@pytest.mark.parametrize("where", ["", "boxing-1M"])
+def test_the_committed_table_json_is_what_the_recorded_evaluations_give(where):
+    from baselines.table import STD_OVER_SEEDS, aggregate, load_evaluations
+
+    out = BASELINE_RESULTS / where
+    recorded = json.loads((out / "table.json").read_text())
+    rebuilt = json.loads(json.dumps(aggregate(load_evaluations(out / "runs"))))  # as written
+    assert recorded["rows"] == rebuilt and recorded["std"] == STD_OVER_SEEDS
+
+
+def markdown_tables(text: str) -> list[list[dict]]:
+    """Every markdown table of ``text``, each as its rows keyed by the header."""
+    tables, block = [], []
+    for line in text.splitlines() + [""]:
+        if line.startswith("|"):
+            block.append([cell.strip() for cell in line.strip().strip("|").split("|")])
+        elif block:
+            tables.append([dict(zip(block[0], row)) for row in block[2:]])
+            block = []
+    return tables
+
+
+SWEEP_COLUMNS = {"emulator limit": ("emulator limit", "-", "raw"),
+                 "ale-py AtariVectorEnv": ("ale-py AtariVectorEnv", "-", "raw"),
+                 "envpool raw": ("envpool raw", "-", "raw"),
+                 "stori-jax raw": ("stori-jax", "3.1", "raw"),
+                 "stori-jax atari84": ("stori-jax", "3.1", "atari84")}
+
+
+@pytest.mark.parametrize("doc", ["README.md", "benchmarks/README.md"])
+def test_the_breakout_sweep_a_readme_shows_is_the_recorded_one(doc):
+    """Every cell of the batch-size sweep a README quotes is the recorded run's number."""
+    recorded = json.loads((BENCHMARK_RESULTS / "2026-11-22-vm.json").read_text())["results"]
+    by = {(r["kind"], r["preset"], r["obs"], r["B"]): r for r in recorded
+          if r["game"] == "Breakout" and r["backend"] in ("-", "subproc", "ale-py", "envpool")
+          and (r["kind"] != "stori-jax" or r["backend"] == "subproc")}
+    rows = [row for table in markdown_tables((ROOT / doc).read_text()) for row in table
+            if "emulator limit" in row and "B" in row]
+    assert len(rows) >= 3, doc  # the README shows B = 8, 32, 64; benchmarks/README all four
+    for row in rows:
+        for column, key in SWEEP_COLUMNS.items():
+            r = by[key + (int(row["B"]),)]
+            shown = f"{r['steps_per_s']:.0f}" + (
+                "" if column == "emulator limit" else f" ({r['vs_limit']:.2f})")
+            assert row[column] == shown, (doc, row["B"], column)
+
+
+@pytest.mark.parametrize("stem", ["2026-11-22-vm", "2026-11-24-vm-3.1-2.2"])
+def test_a_committed_throughput_table_is_its_json(stem):
+    """The .md beside a throughput run's JSON shows its numbers, row for row (the older file
+    has fewer columns: each column it has is checked)."""
+    recorded = json.loads((BENCHMARK_RESULTS / f"{stem}.json").read_text())["results"]
+    (rows,) = [table for table in markdown_tables((BENCHMARK_RESULTS / f"{stem}.md").read_text())
+               if table and "kind" in table[0]]
+    assert len(rows) == len(recorded)
+    for row, r in zip(rows, recorded):
+        assert (row["kind"], row["game"], row["preset"], row["backend"], row["obs"],
+                int(row["B"])) == (r["kind"], r["game"], r["preset"], r["backend"], r["obs"],
+                                   r["B"])
+        assert row["steps/s"] == f"{r['steps_per_s']:.0f}", (stem, row)
+        assert row["vs limit"] == f"{r['vs_limit']:.2f}", (stem, row)
+
+
+def test_the_committed_xla_rollout_table_is_its_json():
+    import importlib
+    import sys
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        xla_rollout = importlib.import_module("xla_rollout")
+    finally:
+        sys.path.remove(str(ROOT / "benchmarks"))
+    stem = BENCHMARK_RESULTS / "xla-rollout-2026-11-23-Breakout-3.1"
+    recorded = json.loads(stem.with_name(stem.name + ".json").read_text())
+    c = recorded["config"]
+    assert xla_rollout.markdown(c["game"], c["preset"], c["steps"], recorded["results"]) == \
+        stem.with_name(stem.name + ".md").read_text()
+
+
 @pytest.mark.parametrize("pattern", ["*-vm.json", "*-vm.md", "*-vm*.png", "jax-stages-*.json",
                                      "ppo-rollout-*.json", "ppo-rollout-*.png"])
 def test_benchmark_results_are_in_the_checkout(pattern):

@@ -265,6 +265,12 @@ def test_the_suite_plays_a_quota_of_episodes_per_env_not_the_first_to_end():
                  policy=lambda obs, key: np.zeros(2, np.int32))
     assert stats["episodes"] == 8 and stats["mean_return"] == 5.5
     assert stats["agent_steps"] == 20  # env 1's fourth episode ends at step 20
+    # 7 episodes: quotas (4, 3), returns 1, 1, 1, 1 and 10, 10, 10: the mean (a median, say,
+    # would be 1; with 8 episodes the mean and the median are both 5.5)
+    stats = play(_TwoPaceEnv(), np.zeros((2, 1)), 0, max_steps=1000, episodes=7,
+                 policy=lambda obs, key: np.zeros(2, np.int32))
+    assert stats["episodes"] == 7 and stats["agent_steps"] == 15
+    assert stats["mean_return"] == pytest.approx(34 / 7)
 
 
 def test_the_twin_row_keeps_its_last_screen_once_its_episode_ended_first():
