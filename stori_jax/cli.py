@@ -71,9 +71,13 @@ def _cmd_run(args) -> int:
     rate, timed = stats["env_steps_per_s"], stats["timed_agent_steps"] * env.num_envs
     print("env steps / s     : " + ("n/a (one agent step, which compiles: not timed)"
                                     if rate is None else
-                                    f"{rate:.0f} ({timed} steps in {stats['elapsed_s']:.3g} s, "
+                                    f"{rate:.0f} ({timed} steps in {_seconds(stats['elapsed_s'])} s, "
                                     "after the first agent step, which compiles)"))
     return 0
+
+
+def _seconds(s: float) -> str:
+    return f"{s:.1f}" if s >= 1 else f"{s:.3g}"
 
 
 def check_out(flag: str, path: Path, *, directory: bool) -> None:
@@ -117,7 +121,10 @@ def selected_presets(games, presets):
     from stori_jax.presets import canonical_game, spelt_as_the_paper
 
     # an unknown game -> a ValueError naming the allowed ones; 'bank_heist' -> 'BankHeist'
-    wanted = {canonical_game(g) for g in games or []}
+    try:
+        wanted = {canonical_game(g) for g in games or []}
+    except ValueError as e:
+        raise ValueError(f"--games: {e}") from None
     in_games = [(g, n) for g, n in list_presets() if not games or g in wanted]
     allowed = list(dict.fromkeys(n for _, n in in_games))
     unknown = [n for n in presets or [] if spelt_as_the_paper(n) not in allowed]

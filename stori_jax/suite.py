@@ -5,6 +5,7 @@ gallery of contact sheets."""
 from __future__ import annotations
 
 import datetime
+import hashlib
 import json
 import os
 import shutil
@@ -138,9 +139,15 @@ def short_rows_note(rows: list[dict], episodes: int, num_envs: int, max_steps: i
 STAGING_PREFIX = ".suite-partial-"  # then <pid>@<host>- of the run that stages its sheets
 
 
+def _host() -> str:
+    """This machine as a staging folder names it: a hash of its name (safe in a file name, and
+    'node-1' is not 'node_1')."""
+    return hashlib.sha256(socket.gethostname().encode()).hexdigest()[:16]
+
+
 def _run_id() -> str:
     """This process as a staging folder names it: its pid and its machine."""
-    return f"{os.getpid()}@{socket.gethostname().replace('-', '_')}"
+    return f"{os.getpid()}@{_host()}"
 
 
 def remove_abandoned_staging(out: Path) -> list[Path]:
@@ -148,7 +155,7 @@ def remove_abandoned_staging(out: Path) -> list[Path]:
     without cleaning up (killed by SIGTERM or SIGKILL, a closed terminal: only an exception or
     Ctrl-C removes its own).  A running suite's folder (its pid alive) stays, and so does
     another machine's (its pids mean nothing here), or one named otherwise."""
-    removed, host = [], _run_id().split("@", 1)[1]
+    removed, host = [], _host()
     for folder in sorted(Path(out).glob(f"{STAGING_PREFIX}*")):
         pid, _, machine = folder.name[len(STAGING_PREFIX):].rpartition("-")[0].partition("@")
         if folder.is_dir() and pid.isdigit() and machine == host and not _alive(int(pid)):

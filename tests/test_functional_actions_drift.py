@@ -424,7 +424,12 @@ def test_the_pure_functions_refuse_arrays_of_the_wrong_dtype_and_values():
             (lambda: concept_of(keys, jnp.arange(5), "sudden", 1),
              r"concept_of takes keys \(B,\) .*got keys \(4, 2\) and episode_step \(5,\)"),
             (lambda: concept_of(jnp.zeros((2, 2, 2), jnp.uint32), 1, "sudden", 1),
-             r"got keys \(2, 2, 2\)")):
+             r"got keys \(2, 2, 2\)"),
+            # raw key data must end in a key's words: (4,) is no batch of keys, () no key
+            (lambda: concept_of(jnp.zeros(4, jnp.uint32), 1, "sudden", 1),
+             r"got keys of shape \(4,\) and dtype uint32"),
+            (lambda: concept_of(jnp.zeros((), jnp.uint32), 1, "gradual", 1),
+             r"got keys of shape \(\) and dtype uint32")):
         with pytest.raises(ValueError, match=match):
             call()
     with pytest.raises(ValueError, match=r"apply must be an array of bools"):  # inside jit too

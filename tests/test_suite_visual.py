@@ -115,15 +115,15 @@ def test_a_suite_run_removes_the_staging_folders_of_runs_killed_before_cleaning_
     removes those of dead runs, not a running one's."""
     import multiprocessing
     import stori_jax.suite
-    from stori_jax.suite import STAGING_PREFIX, _run_id
+    from stori_jax.suite import STAGING_PREFIX, _host
 
     out = tmp_path / "suite"
     dead = multiprocessing.get_context("spawn").Process(target=int)
     dead.start(), dead.join()
-    host = _run_id().split("@")[1]
+    host = _host()
     abandoned = out / f"{STAGING_PREFIX}{dead.pid}@{host}-abc123"
     live = out / f"{STAGING_PREFIX}{os.getpid()}@{host}-def456"  # this process runs
-    elsewhere = out / f"{STAGING_PREFIX}{dead.pid}@another_machine-a_b1"  # its pids: not ours
+    elsewhere = out / f"{STAGING_PREFIX}{dead.pid}@{'0' * 16}-a_b1"  # its pids: not ours
     foreign = out / f"{STAGING_PREFIX}notapid"
     folders = (abandoned, live, elsewhere, foreign)
     for folder in folders:

@@ -29,12 +29,19 @@ def concept_of(keys: jax.Array, episode_step: jax.Array, schedule: str, period: 
     (B,) for ``keys`` (B,) (a batch of typed keys, or (B, 2) raw uint32 ones), () for a single
     key (one env, e.g. under ``jax.vmap``); ``episode_step`` is each env's or one for all (a
     scalar)."""
-    typed = jax.dtypes.issubdtype(keys.dtype, jax.dtypes.prng_key)
-    batch = tuple(np.shape(keys)) if typed else tuple(np.shape(keys))[:-1]
+    given = tuple(np.shape(keys))
+    if not jax.dtypes.issubdtype(keys.dtype, jax.dtypes.prng_key):  # raw uint32 key data
+        try:
+            keys = jax.random.wrap_key_data(keys)  # checks its trailing axis: a key's words
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"concept_of takes keys (B,) (raw: (B, 2)) or one key, got keys "
+                             f"of shape {tuple(np.shape(keys))} and dtype {keys.dtype} "
+                             f"({e})") from None
+    batch = tuple(np.shape(keys))
     if len(batch) > 1 or np.shape(episode_step) not in ((), batch):
         raise ValueError(f"concept_of takes keys (B,) (raw: (B, 2)) or one key, and an "
                          f"episode_step of shape () or the keys' (B,): got keys "
-                         f"{tuple(np.shape(keys))} and episode_step "
+                         f"{given} and episode_step "
                          f"{tuple(np.shape(episode_step))}")
     p2 = jnp.broadcast_to(concept2_probability(episode_step, schedule, period), batch)
     if schedule == "gradual":
