@@ -208,10 +208,12 @@ class _RepeatedKey(Exception):
 
 
 def _object_without_repeats(pairs: list) -> dict:
-    keys = [key for key, _ in pairs]
-    for key in keys:
-        if keys.count(key) > 1:
+    """A JSON object's dict (json's object_pairs_hook), refusing a key given twice."""
+    seen = set()
+    for key, _ in pairs:
+        if key in seen:
             raise _RepeatedKey(repr(key))
+        seen.add(key)
     return dict(pairs)
 
 

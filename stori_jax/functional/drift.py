@@ -35,7 +35,7 @@ def concept_of(keys: jax.Array, episode_step: jax.Array, schedule: str, period: 
             keys = jax.random.wrap_key_data(keys)  # checks its trailing axis: a key's words
         except (TypeError, ValueError) as e:
             raise ValueError(f"concept_of takes keys (B,) (raw: (B, 2)) or one key, got keys "
-                             f"of shape {tuple(np.shape(keys))} and dtype {keys.dtype} "
+                             f"of shape {given} and dtype {keys.dtype} "
                              f"({e})") from None
     batch = tuple(np.shape(keys))
     if len(batch) > 1 or np.shape(episode_step) not in ((), batch):

@@ -91,8 +91,7 @@ def area_resize(image, height: int, width: int, *, y_axis: int, x_axis: int):
     x = image.astype(jnp.int32)  # sums, rounding included, stay below 2**31 (checked above)
     x = _resize_axis(x, y_axis, height)
     x = _resize_axis(x, x_axis, width)
-    denominator = count
-    return ((x + denominator // 2) // denominator).astype(jnp.uint8)
+    return ((x + count // 2) // count).astype(jnp.uint8)
 
 
 def frames_shape(layout: str, num_envs: int, screen: tuple[int, int, int]) -> tuple[int, ...]:
