@@ -272,15 +272,10 @@ def test_a_committed_throughput_table_is_its_json(stem):
         assert row["vs limit"] == f"{r['vs_limit']:.2f}", (stem, row)
 
 
-def test_the_committed_xla_rollout_table_is_its_json():
-    import importlib
-    import sys
+def test_the_committed_xla_rollout_table_is_its_json(monkeypatch):
+    from test_benchmarks import script
 
-    sys.path.insert(0, str(ROOT / "benchmarks"))
-    try:
-        xla_rollout = importlib.import_module("xla_rollout")
-    finally:
-        sys.path.remove(str(ROOT / "benchmarks"))
+    xla_rollout = script(monkeypatch, "xla_rollout")
     stem = BENCHMARK_RESULTS / "xla-rollout-2026-11-23-Breakout-3.1"
     recorded = json.loads(stem.with_name(stem.name + ".json").read_text())
     c = recorded["config"]
