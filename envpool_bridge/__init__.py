@@ -18,7 +18,8 @@ env i of seed s + 1).
 
 An episode that ends before a step's last two frames: envpool stops its frame loop before
 taking the screens, so the final observation (``autoreset=False``) repeats the step before's;
-the ``subproc`` backend shows the episode's last frame.
+the ``subproc`` backend shows the episode's last frame.  Nor does envpool say which frame
+ended it: ``info['frames_played']`` is frame_skip for every stepped env.
 
 Episode ends: ``max_episode_frames`` becomes envpool's step cap (frames / frame skip, rounded up),
 which does not count the reset's no-op frames as ALE's frame cap on ``subproc`` does (with
@@ -104,6 +105,7 @@ class EnvpoolBackend:
             max_episode_steps=-(-max_episode_frames // plan.frame_skip))
         self.pool = self._make_pool(seed)
         self.num_envs = b
+        self._frame_skip = plan.frame_skip
         # the subproc backend's buffers, but one max-pooled screen per env, channels first
         self.views = {name: np.zeros(shape, dtype)
                       for name, (shape, dtype) in buffer_specs(b, plan.frame_skip).items()}
@@ -180,6 +182,9 @@ class EnvpoolBackend:
         v["reward"][...] = reward
         v["terminated"][...] = terminated
         v["truncated"][...] = truncated
+        # envpool does not say on which frame of the step an episode ended: every frame of a
+        # stepped env counts as played
+        v["frames_played"][...] = np.where(reset_step, 0, self._frame_skip)
         self._running_return = np.where(reset_step, 0.0, self._running_return + reward)
         self._running_length = np.where(reset_step, 0, self._running_length + 1)
         done = np.asarray(terminated) | np.asarray(truncated)

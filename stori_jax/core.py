@@ -150,6 +150,7 @@ class WorkerOutputs(NamedTuple):
     ram_rendered: object  # (B,) uint8
     single_frame: object  # (B,) uint8: both screens are one emulator frame (a reset, frame
     #                       skip 1, or an episode that ended before the step's last frame)
+    frames_played: object  # (B,) int32: emulator frames the step played (0: reset instead)
     reward: object        # (B,) float32
     terminated: object    # (B,) uint8
     truncated: object     # (B,) uint8
@@ -210,9 +211,12 @@ def after_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, ne
     # an env reset instead of stepped played no-ops (NOOP), not this step's drawn actions, and
     # its first observation is seen under concept 1
     stepped = ~jnp.asarray(reset_step, bool)
+    # a slot is played unless the env was reset instead, or (at frame granularity) its
+    # episode ended on an earlier frame of the step: ALE plays no frame past an episode's end
+    played = (jnp.arange(plan.num_slots)[None, :] < out.frames_played[:, None]) & stepped[:, None]
     info = {
-        "executed_action": slots_out(jnp.where(stepped[:, None], draws.executed_slots, 0)),
-        "action_corrupted": slots_out(draws.corrupted & stepped[:, None]),
+        "executed_action": slots_out(jnp.where(played, draws.executed_slots, 0)),
+        "action_corrupted": slots_out(draws.corrupted & played),
         "event_fired": out.event_fired + 0,
         "concept": jnp.where(stepped, draws.concept, 0),
         "obs_masked": masked,
@@ -222,6 +226,7 @@ def after_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, ne
         "episode_return": out.episode_return + 0,
         "episode_length": out.episode_length + 0,
         "reset_step": reset_step,
+        "frames_played": out.frames_played + 0,
     }
     episode_step = jnp.where(new_episode, 0, state.episode_step + 1)
     # a new episode starts from NOOP (action 0), as after env.reset(): sticky actions never
@@ -243,8 +248,8 @@ def finish_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, r
     if plan.obs == "atari84":
         if isinstance(obs, jax.core.Tracer):  # traced with its caller: keep the two apart
             obs = jax.lax.optimization_barrier(obs)
-        obs = push_frames(state.stack, obs, new_episode)
-        state = state._replace(stack=obs)
+        stack, obs = push_frames(state.stack, obs, new_episode)
+        state = state._replace(stack=stack)
     pending = done if not plan.autoreset else done & False
     return state, (obs, reward, terminated, truncated, info), pending
 
@@ -252,5 +257,8 @@ def finish_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, r
 @jax.jit
 def push_frames(stack, frame, new_episode):
     """The atari84 frame stack.  Compiled on its own: fused with the resize above, XLA would
-    recompute the resize for each of the 4 stack slots of a new episode (measured 4x slower)."""
-    return F.push_frame(stack, frame, new_episode)
+    recompute the resize for each of the 4 stack slots of a new episode (measured 4x slower).
+    (the env's stack, the observation): two buffers, so that a caller who donates the
+    observation to a jit of its own leaves the env's state intact."""
+    stack = F.push_frame(stack, frame, new_episode)
+    return stack, stack

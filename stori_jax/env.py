@@ -384,6 +384,11 @@ class Env:
         self._needs_reset = False
         return obs, info
 
+    def _refuse_if_xla_driven(self) -> None:
+        if self._xla_driven:
+            raise RuntimeError("this env is stepped by the step function of env.xla(): keep "
+                               "using it, or call reset() to step the env from Python again")
+
     def _deadline(self, timeout, call: str) -> float | None:
         """When a wait bounded by ``timeout`` seconds from now ends (None: no bound); checked
         before anything is sent, so a refused timeout changes nothing."""
@@ -418,9 +423,7 @@ class Env:
         if self._needs_reset:
             raise RuntimeError("call reset() first (before the first step, and after an "
                                "interrupted step or reset)")
-        if self._xla_driven:
-            raise RuntimeError("this env is stepped by the step function of env.xla(): keep "
-                               "using it, or call reset() to step the env from Python again")
+        self._refuse_if_xla_driven()
         if self._in_flight is not None:
             raise RuntimeError("a step is already in flight: call recv() before send() again")
         self._refuse_if_workers_busy()
@@ -462,6 +465,7 @@ class Env:
         self._check_open()
         deadline = self._deadline(timeout, "recv")
         if self._in_flight is None:
+            self._refuse_if_xla_driven()
             if not self._needs_reset:
                 self._refuse_if_workers_busy()
             if self._needs_reset:
@@ -506,6 +510,8 @@ class Env:
         settled env (after ``reset()``, nothing in flight); from then on the env is stepped
         only through ``step``, until ``reset()``, which makes every handle stale (call
         ``xla()`` again for a new one; ``step`` is the same function, so nothing recompiles).
+        The handle, like every observation, is the caller's own: a jit that donates it
+        (``donate_argnums``) leaves the env's state intact.
         Errors in the emulators (a dead worker, an action out of range, a stale handle or one
         of another env) surface as a ``jax.errors.JaxRuntimeError`` whose last line is the
         error; on an accelerator, when the step's results are read (a handle of an env of
@@ -528,7 +534,10 @@ class Env:
         self._xla_steps, self._xla_driven = 0, True
         if self._xla_step is None:
             self._xla_step = xla.make_step(self._jit_plan, self._xla_emulate)
-        return (xla.initial_handle(self._state, self._reset_pending, self._xla_epoch),
+        # the handle gets copies: a caller's jit may donate it, and the env's own state must
+        # survive that (reset() starts from it)
+        state = jax.tree.map(jnp.copy, self._state)
+        return (xla.initial_handle(state, self._reset_pending, self._xla_epoch),
                 self._xla_step)
 
     def _settle_xla(self) -> None:

@@ -8,7 +8,9 @@
   logged (intended, executed) pairs, e.g. from ``info["executed_action"]`` (leave out the rows
   where ``info["reset_step"]``: an env reset instead of stepped executed NOOPs, reported as 0).
   At frame granularity ``executed_action`` is (T, B, frame_skip), one action per frame: repeat
-  the intended actions to match (``np.repeat(intended[..., None], frame_skip, -1)``).
+  the intended actions to match (``np.repeat(intended[..., None], frame_skip, -1)``), and keep
+  only the slots below ``info["frames_played"]`` (those after an episode's last frame were not
+  played: reported as 0).
 - ``next_state_variance(states)``: the spread of next states reached under a fixed action, the
   quantity of the paper's variance-calibration probe.
 

@@ -196,3 +196,31 @@ def test_a_steps_per_frame_actions_reach_the_emulator_in_frame_order():
     finally:
         env.close()
     assert mixed >= 5  # steps whose frames ran different actions: the order matters there
+
+
+@pytest.mark.parametrize("autoreset", [True, False])
+def test_frames_after_an_episode_s_end_are_reported_as_not_played(autoreset):
+    """Frame granularity, an episode cut at frame 6 of steps of 4 frames: its second step plays
+    2 frames, so its last two slots report NOOP (0) and no corruption (ALE plays no frame past
+    an episode's end; an env reset instead of stepped reports the same)."""
+    env = make("Breakout", noise(1.0), num_envs=1, num_workers=0, obs="ram",
+               max_episode_frames=6, autoreset=autoreset)
+    ale = new_ale("breakout", emulator_seeds(0, 1)[0])
+    minimal = ale.getMinimalActionSet()
+    ale.reset_game()
+    try:
+        env.reset()
+        for k in range(2):
+            obs, _, _, truncated, info = to_numpy(env.step(np.array([k + 1], np.int32)))
+            played = 4 if k == 0 else 2
+            assert bool(truncated[0]) == (k == 1)
+            assert info["frames_played"][0] == played
+            corrupted, executed = info["action_corrupted"][0], info["executed_action"][0]
+            np.testing.assert_array_equal(corrupted, np.arange(4) < played, err_msg=f"step {k}")
+            assert (executed[played:] == 0).all()
+            for action in executed[:played]:
+                ale.act(minimal[int(action)])
+        if not autoreset:  # the final observation: the RAM after exactly the played frames
+            np.testing.assert_array_equal(obs[0], ale.getRAM())
+    finally:
+        env.close()

@@ -153,6 +153,7 @@ def test_a_reset_step_reports_no_drawn_action_and_concept_1():
     np.testing.assert_array_equal(concept[:, 0], [0, 0, 0, 1, 1, 1, 0, 0])
     assert corrupted[3:6].all() and not corrupted[6].any() and not corrupted[:3].any()
     assert not run.stacked("executed_action")[6].any()
+    np.testing.assert_array_equal(run.stacked("frames_played")[:, 0], np.where(reset_step, 0, 4))
     for info in (run.reset_info, run.info[6]):
         assert not info["concept"].any() and not info["action_corrupted"].any()
 

@@ -165,6 +165,35 @@ def test_a_handle_of_an_env_of_another_size_or_observation_is_refused_while_trac
         handles["wider"][1](handles["wider"][0], jnp.zeros(3, jnp.int32))
 
 
+@pytest.mark.parametrize("obs", ["atari84", "raw"])
+def test_donating_a_handle_or_an_observation_leaves_the_env_intact(obs):
+    """A caller's jit may donate its inputs (``donate_argnums``): the env hands out copies, so
+    its own state survives, and it goes on exactly as an env whose arrays were not donated."""
+    actions = random_actions(4, 6, 2, seed=9)
+    donate = jax.jit(lambda x: jax.tree.map(lambda a: a // 2, x), donate_argnums=0)
+
+    def play(env, donating):
+        first, _ = env.reset()
+        handle, step = env.xla()
+        later, _ = step(handle, jnp.asarray(actions[0]))
+        if donating:  # the first observation, the handle xla() gave and the one it stepped to
+            donate((first, handle, later))
+            assert first.is_deleted() and handle.state.stack.is_deleted()
+        start = env.reset()
+        last_obs = env.step(actions[1])[0]
+        if donating:
+            donate(last_obs)
+            assert last_obs.is_deleted()
+        return start, python_steps(env, actions[2:])
+
+    with make("Breakout", preset="1", obs=obs) as env:
+        expected = play(env, donating=False)
+    with make("Breakout", preset="1", obs=obs) as env:
+        got = play(env, donating=True)
+    jax.tree.map(np.testing.assert_array_equal, to_numpy(got[0]), to_numpy(expected[0]))
+    assert_same(got[1], expected[1])
+
+
 def test_xla_misuse_is_a_clear_error():
     with make("Breakout") as env:
         with pytest.raises(RuntimeError, match="settled env: reset"):
@@ -175,6 +204,8 @@ def test_xla_misuse_is_a_clear_error():
             env.xla()
         with pytest.raises(RuntimeError, match="stepped by the step function of env.xla"):
             env.step(np.zeros(2, np.int32))
+        with pytest.raises(RuntimeError, match="stepped by the step function of env.xla"):
+            env.recv()  # not "call send() first": send is refused too
         with pytest.raises(RuntimeError, match="needs a settled env"):
             env.snapshot()
         with pytest.raises(ValueError, match=r"shape \(2,\) of ints in \[0, 3\], got shape \(3,\)"):

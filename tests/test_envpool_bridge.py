@@ -97,6 +97,7 @@ def test_episode_statistics_and_next_step_reset():
             _, reward, terminated, truncated, info = env.step(rng.integers(0, 4, 2))
             reset_step = np.asarray(info["reset_step"])
             np.testing.assert_array_equal(reset_step, done)
+            np.testing.assert_array_equal(info["frames_played"], np.where(reset_step, 0, 4))
             assert not np.asarray(reward)[reset_step].any()
             total = np.where(reset_step, 0, total + np.asarray(reward))
             length = np.where(reset_step, 0, length + 1)

@@ -44,6 +44,9 @@ def buffer_specs(num_envs: int, frame_skip: int,
         "event_fired": ((b,), np.int32),
         "ram_rendered": ((b,), np.uint8),              # render bits actually applied (0..3)
         "single_frame": ((b,), np.uint8),              # both screens are one emulator frame
+        "frames_played": ((b,), np.int32),             # emulator frames the step played (0:
+        #                                                reset instead; < frame_skip: its
+        #                                                episode ended before the last frame)
         "episode_return": ((b,), np.float32),          # final value where an episode ended
         "episode_length": ((b,), np.int32),
     }

@@ -128,7 +128,7 @@ class Emulator:
             self.ale.setInt("random_seed", emulator_seed(batch_seed, self.i))
             self.ale.loadROM(self.rom_path)
         for name in ("reward", "terminated", "truncated", "event_fired", "episode_return",
-                     "episode_length"):
+                     "episode_length", "frames_played"):
             self.v[name][self.i] = 0
         self.reset()
 
@@ -247,6 +247,7 @@ class Emulator:
         if spec.want_screens and single:
             self.frames[0] = self.frames[1]
         v["single_frame"][i] = single
+        v["frames_played"][i] = f + 1
         self.episode_return += total
         self.episode_length += 1
         v["reward"][i] = total
