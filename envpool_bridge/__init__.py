@@ -23,9 +23,9 @@ ended it: ``info['frames_played']`` is frame_skip for every stepped env.
 
 Episode ends: ``max_episode_frames`` becomes envpool's step cap (frames / frame skip, rounded up),
 which does not count the reset's no-op frames as ALE's frame cap on ``subproc`` does (with
-``noop_max`` > 0 a truncation can come up to about noop_max / frame_skip + 1 steps later here);
-and where the game ends on the step that reaches the cap, envpool reports ``terminated`` False
-(``truncated`` only), while ``subproc`` reports both.
+``noop_max`` > 0 a truncation can come up to about noop_max / frame_skip + 1 steps later here).
+A game that ends on the step that reaches the cap is ``terminated`` and ``truncated``, as on
+``subproc``.
 
 No-op starts: envpool plays at least one NOOP frame at every reset (its ``noop_max=N`` draws
 1..N frames), so this backend passes ``noop_max + 1`` and an episode starts after 1..noop_max+1
@@ -42,6 +42,7 @@ from stori_jax.backends.layout import SCREEN, buffer_specs
 from stori_jax.backends.subproc import EnvClosedError
 
 FRAMES_LAYOUT = "pooled_chw"  # (B, 3, 210, 160): envpool's max-pooled screen, channels first
+MIN_ENVPOOL_MAJOR = 1  # pyproject's envpool>=1.0: older ones have no info['ram']
 MAX_BASE_SEED = 2**30 - 1  # envpool's int32 seed: base + i stays below 2**31 for B < 2**30
 
 
@@ -87,6 +88,11 @@ class EnvpoolBackend:
         except ImportError as e:
             raise ValueError("backend='envpool' needs the envpool package: "
                              "pip install 'stori-jax[envpool]'") from e
+        found = envpool.__version__
+        if int(found.split(".")[0]) < MIN_ENVPOOL_MAJOR:
+            raise ValueError(f"backend='envpool' needs envpool>={MIN_ENVPOOL_MAJOR}.0 (its info "
+                             f"has the RAM from 1.0 on), found envpool {found}: "
+                             "pip install 'stori-jax[envpool]'")
         from stori_jax.games import get_game
 
         game = get_game(plan.game)
@@ -173,7 +179,10 @@ class EnvpoolBackend:
             terminated = truncated = np.zeros(self.num_envs, bool)
             reset_step = np.ones(self.num_envs, bool)
         else:
-            obs, reward, terminated, truncated, info = self.pool.recv()
+            obs, reward, _, truncated, info = self.pool.recv()
+            # envpool's own terminated is "done and not truncated": a game over on the step that
+            # reaches the cap would read as a truncation only.  Its info has ALE's game over.
+            terminated = np.asarray(info["terminated"], bool)
             reset_step = v["reset_first"].astype(bool)  # envpool resets these itself
         self._pending = None
         v["frames"][...] = obs

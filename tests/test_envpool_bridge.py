@@ -1,5 +1,7 @@
 """The envpool backend: what it supports, clear errors for what it cannot, reproducibility."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -181,6 +183,26 @@ def test_truncation_comes_at_the_same_step_as_on_subproc():
         assert truncated == [False, True], backend
 
 
+def test_a_game_over_on_the_step_that_reaches_the_cap_is_terminated_too():
+    """envpool's own ``terminated`` is "done and not truncated": the bridge reports ALE's game
+    over (as subproc does), so a learner does not bootstrap from a lost game."""
+    def first_end(max_episode_frames):
+        with stori_jax.make("Breakout", num_envs=1, seed=0, obs="ram",
+                            max_episode_frames=max_episode_frames, **EP) as env:
+            env.reset()
+            rng = np.random.default_rng(0)
+            for k in range(5000):
+                action = 1 if k < 3 else rng.integers(0, 4)  # FIRE launches the ball
+                _, _, terminated, truncated, info = env.step(np.array([action], np.int32))
+                if terminated[0] or truncated[0]:
+                    return k, bool(terminated[0]), bool(truncated[0]), int(info["lives"][0])
+        raise AssertionError("no episode end in 5000 steps")
+
+    k, *outcome = first_end(10**6)
+    assert outcome == [True, False, 0]  # the game is lost at step k
+    assert first_end((k + 1) * 4) == (k, True, True, 0)  # ... which now reaches the cap too
+
+
 @pytest.mark.parametrize("name, value", [("noop_max", 2**31 - 1),  # envpool is given noop_max + 1
                                          ("max_episode_frames", 2**31)])
 def test_int32_overflow_is_named_before_any_backend_starts(name, value):
@@ -193,6 +215,21 @@ def test_a_game_envpool_lacks_is_named(monkeypatch):
     monkeypatch.setattr(envpool, "list_all_envs", lambda: [])
     with pytest.raises(ValueError, match="envpool has no Atari task 'Breakout-v5' for game "
                                          "'Breakout'; use backend='subproc'"):
+        stori_jax.make("Breakout", num_envs=1, seed=0, **EP)
+
+
+def test_an_envpool_without_the_ram_in_its_info_is_named(monkeypatch):
+    import tomllib
+
+    from envpool_bridge import MIN_ENVPOOL_MAJOR
+
+    root = Path(__file__).resolve().parent.parent
+    project = tomllib.loads((root / "pyproject.toml").read_text())["project"]
+    extras = project["optional-dependencies"]
+    assert extras["envpool"] == [f"envpool>={MIN_ENVPOOL_MAJOR}.0"]  # the pin says the same
+    monkeypatch.setattr(envpool, "__version__", "0.8.4")
+    with pytest.raises(ValueError, match=r"needs envpool>=1\.0 .* found envpool 0\.8\.4: pip "
+                                         r"install 'stori-jax\[envpool\]'"):
         stori_jax.make("Breakout", num_envs=1, seed=0, **EP)
 
 
