@@ -113,9 +113,7 @@ class _Owner:
                              "use `stori-jax record` for videos")
         for name in ("num_envs", "autoreset"):
             if name in make_kwargs:
-                raise ValueError(f"{name} is set by the gymnasium adapter (one env, whose "
-                                 "step after an episode's end starts the next one; "
-                                 "gymnasium.make_vec(id, num_envs=N) for a batch), got "
+                raise ValueError(f"{name} is set by the gymnasium adapter ({self._fixed}), got "
                                  f"{name}={make_kwargs[name]!r}")
         self._make = lambda s: stori_jax.make(game, preset, num_envs=num_envs, seed=s,
                                               autoreset=False, **make_kwargs)
@@ -164,6 +162,9 @@ class _Owner:
 
     @staticmethod
     def _check_options(options):
+        if options is not None and not isinstance(options, dict):
+            raise ValueError(f"options must be a dict or None (gymnasium's reset), got "
+                             f"{options!r}")
         if options:  # None or {}: nothing asked
             raise ValueError(f"reset options are not supported by stori_jax envs (reset() "
                              f"resets every env; no partial reset_mask), got {options!r}")
@@ -184,6 +185,8 @@ class StoriGymEnv(_Owner, gym.Env):
     reward 0, ``info["reset_step"]`` True), as the batched env's next-step autoreset does."""
 
     metadata = {"render_modes": []}
+    _fixed = ("one env, whose step after an episode's end starts the next one; "
+              "gymnasium.make_vec(id, num_envs=N) for a batch")
 
     def __init__(self, game: str, preset: str | None = None, seed: int | None = None,
                  **make_kwargs):
@@ -212,6 +215,8 @@ class StoriVectorEnv(_Owner, VectorEnv):
     """B STORI envs as a gymnasium VectorEnv (numpy, autoreset mode NEXT_STEP)."""
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+    _fixed = ("gymnasium's NEXT_STEP autoreset: the step after an env's episode ends starts "
+              "its next one")
 
     def __init__(self, num_envs: int, game: str, preset: str | None = None,
                  seed: int | None = None, **make_kwargs):

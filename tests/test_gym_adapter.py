@@ -141,6 +141,12 @@ def test_kwargs_that_would_contradict_the_id_are_refused(kwargs, pattern):
         gym.make_vec("stori_jax/Breakout-2.1-v0", num_envs=2, game="Boxing")
 
 
+def test_a_vector_env_s_fixed_autoreset_is_named_as_its_own():
+    with pytest.raises(ValueError, match=r"autoreset is set by the gymnasium adapter \(gymnasium's "
+                                         r"NEXT_STEP autoreset.*\), got autoreset=True"):
+        gym.make_vec("stori_jax/Breakout-2.1-v0", num_envs=2, autoreset=True)
+
+
 def test_the_ids_own_game_and_preset_in_another_case_are_not_a_contradiction():
     env = gym.make("stori_jax/Breakout-3.2A-v0", game="breakout", preset="3.2a", obs="raw")
     env.close()
@@ -179,6 +185,9 @@ def test_reset_options_are_refused_not_ignored(vector):
         env.reset(options={})  # nothing asked
         with pytest.raises(ValueError, match="reset options are not supported.*reset_mask"):
             env.reset(options={"reset_mask": np.array([True, False])})
+        for falsy in ([], 0, "", False):  # not a dict: refused, even when it asks nothing
+            with pytest.raises(ValueError, match=r"options must be a dict or None .*got "):
+                env.reset(options=falsy)
     finally:
         env.close()
 
