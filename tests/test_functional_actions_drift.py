@@ -389,13 +389,16 @@ def test_the_pure_functions_refuse_arrays_of_the_wrong_dtype_and_values():
     sums wrapped around (255 resized to 34); and concept_of gave () for a scalar step under
     sudden and cyclic, (B,) under gradual."""
     from stori_jax.functional import (apply_masks, atari84_frame, dreamer64, extract_labels,
-                                      region_mask, to_gray, torch_mask)
+                                      max_pool, push_frame, region_mask, reset_stack, to_gray,
+                                      torch_mask)
     from stori_jax.functional.masks import CROP_REGIONS
     from stori_jax.functional.preprocess import area_resize
 
     keys, zeros = keys_of(0)[:4], jnp.zeros(4, jnp.int32)
     hidden, fill = region_mask(CROP_REGIONS[1])
     frames = jnp.full((4, 2, 210, 160, 3), 255, jnp.uint8)
+    gray, no = jnp.zeros((3, 84, 84), jnp.uint8), jnp.zeros(3, bool)
+    stack = jnp.zeros((3, 84, 84, 4), jnp.uint8)
     for call, match in (
             (lambda: corrupt_actions(keys, jnp.array([1.7, 2.9, 3.5, 0.0]), zeros, prob=0,
                                      num_slots=1, replacement=(0, 1)),
@@ -415,6 +418,16 @@ def test_the_pure_functions_refuse_arrays_of_the_wrong_dtype_and_values():
             (lambda: atari84_frame(jnp.full((1, 210, 160, 3), 0.9)), r"screen must be .*uint8"),
             (lambda: dreamer64(jnp.zeros((1, 210, 160, 3), jnp.int32)), r"screen must be .*uint8"),
             (lambda: to_gray(jnp.zeros((2, 3), jnp.float32)), r"rgb must be .*uint8"),
+            (lambda: max_pool(jnp.zeros((1, 2, 4, 3), jnp.int32)), r"frames must be .*uint8"),
+            (lambda: reset_stack(jnp.zeros((3, 84, 84), jnp.float32)), r"frame must be .*uint8"),
+            (lambda: reset_stack(jnp.zeros((84, 84), jnp.uint8)), r"frame must have shape"),
+            (lambda: push_frame(stack, jnp.full((3, 84, 84), 0.7), no),
+             r"frame must be an array of uint8"),
+            (lambda: push_frame(stack.astype(jnp.int32), gray, no), r"stack must be .*uint8"),
+            (lambda: push_frame(stack[:2], gray, no), r"stack must have shape \(3, 84, 84, 4\)"),
+            (lambda: push_frame(stack, gray, jnp.array([0, 1, 2])),
+             r"new_episode must be an array of bools"),
+            (lambda: push_frame(stack, gray, no[:2]), r"new_episode must have shape \(3,\)"),
             (lambda: area_resize(jnp.full((1, 2900, 2900), 255, jnp.uint8), 1, 1, y_axis=1,
                                  x_axis=2), r"image is too large for area_resize's int32 sums"),
             (lambda: extract_labels("Breakout", jnp.full((1, 128), 300, jnp.int32)),

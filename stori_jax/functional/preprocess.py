@@ -26,6 +26,7 @@ def max_pool(frames):
     if np.ndim(frames) < 2 or np.shape(frames)[1] != 2:
         raise ValueError(f"frames must have shape (B, 2, ...) (two screens per env), got "
                          f"{tuple(np.shape(frames))}")
+    check_dtype("frames", frames, "B", "uint8 screens (B, 2, ...)")
     return jnp.maximum(frames[:, 0], frames[:, 1])
 
 
@@ -131,14 +132,32 @@ def atari84_frame(screen):
     return area_resize(to_gray(screen), ATARI84, ATARI84, y_axis=1, x_axis=2)
 
 
+def _check_gray_frames(frame) -> None:
+    if np.ndim(frame) != 3:
+        raise ValueError(f"frame must have shape (B, height, width) (gray frames, e.g. "
+                         f"(B, 84, 84)), got {tuple(np.shape(frame))}")
+    check_dtype("frame", frame, "B", "uint8 gray frames (B, height, width)")
+
+
 def reset_stack(frame):
     """(B, 84, 84) -> (B, 84, 84, 4): the first frame of an episode repeated."""
+    _check_gray_frames(frame)
     return jnp.repeat(frame[..., None], STACK, axis=-1)
 
 
 def push_frame(stack, frame, new_episode):
     """Shift ``frame`` (B, 84, 84) into ``stack`` (B, 84, 84, 4); restart it where
     ``new_episode`` (B,) bool."""
+    _check_gray_frames(frame)
+    shape = tuple(np.shape(frame))
+    if tuple(np.shape(stack)) != shape + (STACK,):
+        raise ValueError(f"stack must have shape {shape + (STACK,)} (frame's, {STACK} frames "
+                         f"each), got {tuple(np.shape(stack))}")
+    check_dtype("stack", stack, "B", "uint8 frame stacks")
+    if tuple(np.shape(new_episode)) != shape[:1]:
+        raise ValueError(f"new_episode must have shape {shape[:1]} (one flag per frame), got "
+                         f"{tuple(np.shape(new_episode))}")
+    check_dtype("new_episode", new_episode, "b", "bools (where an episode starts)")
     pushed = jnp.concatenate([stack[..., 1:], frame[..., None]], axis=-1)
     return jnp.where(new_episode[:, None, None, None], reset_stack(frame), pushed)
 
