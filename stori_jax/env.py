@@ -623,6 +623,9 @@ class Env:
         """Continue from ``snapshot`` (taken by :meth:`snapshot` of an env made alike; its seed
         may differ: the emulators and the key come from the snapshot, and so does ``seed``)."""
         self._check_open()
+        if not hasattr(self.backend, "restore"):  # first: no snapshot could ever fit
+            raise ValueError(f"backend {type(self.backend).__name__} cannot restore emulators; "
+                             "use backend='subproc'")
         if not isinstance(snapshot, dict) or set(snapshot) != {
                 "plan", "seed", "state", "reset_pending", "emulators"}:
             raise ValueError("snapshot must be a dict returned by Env.snapshot()")
@@ -634,9 +637,6 @@ class Env:
         if differs:
             raise ValueError("snapshot was taken of a different env (make this one with the "
                              "same arguments): " + "; ".join(differs))
-        if not hasattr(self.backend, "restore"):
-            raise ValueError(f"backend {type(self.backend).__name__} cannot restore emulators; "
-                             "use backend='subproc'")
         self._needs_reset = True  # until the emulators and the state are both restored
         self._settle_xla()
         if self._in_flight is not None or getattr(self.backend, "pending", False):

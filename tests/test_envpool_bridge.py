@@ -147,6 +147,22 @@ def test_a_timeout_is_refused_before_anything_is_sent():
         env.recv()  # the step was neither lost nor half-done
 
 
+def test_snapshots_are_refused_naming_the_subproc_backend():
+    """envpool cannot save or load its emulators: snapshot() and restore() say so (restore did
+    first compare the snapshot with the env, and asked for an env made alike instead)."""
+    with stori_jax.make("Breakout", num_envs=2, seed=0, obs="ram", num_workers=0,
+                        **on("subproc")) as env:
+        env.reset()
+        snapshot = env.snapshot()
+    with stori_jax.make("Breakout", num_envs=2, seed=0, obs="ram", **EP) as env:
+        env.reset()
+        with pytest.raises(ValueError, match=r"snapshot.*use backend='subproc'"):
+            env.snapshot()
+        with pytest.raises(ValueError, match=r"^backend EnvpoolBackend cannot restore emulators; "
+                                             r"use backend='subproc'$"):
+            env.restore(snapshot)
+
+
 def _noop_frames_played(rams):
     """For each env's reset RAM, how many NOOP frames a bare ale-py Breakout played to reach it."""
     ale = new_ale("breakout")
