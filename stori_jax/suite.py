@@ -69,9 +69,12 @@ def play(env, obs, seed: int, *, max_steps: int, episodes: int | None = None,
         returns.extend(np.asarray(info["episode_return"])[counted].tolist())
         ended += done
         events += int(np.asarray(info["event_fired"]).sum())
-        flags = np.asarray(info["action_corrupted"])
-        corrupted += int(flags.sum())
-        slots += flags.size
+        # draws of the slots played only: not an env reset instead, nor (at frame granularity)
+        # the frames after an episode's last one
+        flags = np.asarray(info["action_corrupted"]).reshape(env.num_envs, -1)
+        played = np.arange(flags.shape[1]) < np.asarray(info["frames_played"])[:, None]
+        corrupted += int(flags[played].sum())
+        slots += int(played.sum())
         masked += int(np.asarray(info["obs_masked"]).sum())
         concept = np.asarray(info["concept"])
         switches += int((concept != previous_concept).sum())

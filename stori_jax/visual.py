@@ -119,8 +119,9 @@ def twin_run(game: str, config: Config, steps: int, seed: int = 0, *, with_twin:
                 concept=0 if first else int(np.asarray(info["concept"])[k]),
                 masked=bool(np.asarray(info["obs_masked"])[k]),
                 action=None if first else int(actions[k]),
+                # the frames played only (an episode's last step may end before its last)
                 executed=None if first else np.asarray(info["executed_action"])[k].reshape(
-                    -1).tolist()))
+                    -1)[:int(np.asarray(info["frames_played"])[k])].tolist()))
             if not first and bool(terminated[k] | truncated[k]):
                 break
     finally:

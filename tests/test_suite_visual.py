@@ -33,6 +33,24 @@ def test_suite_writes_table_json_and_gallery(tmp_path, capsys):
             assert img.width > 300 and img.height > 400
 
 
+@pytest.mark.parametrize("autoreset", [True, False])
+def test_the_corrupted_fraction_counts_the_draws_of_played_frames_only(autoreset):
+    """p = 1 per frame, episodes cut at frame 6 (steps of 4 frames): every frame played is
+    corrupted, so the fraction is 1 (the frames after an episode's end, and the steps that
+    reset an env instead (autoreset=False), are not draws)."""
+    from stori_jax.suite import play
+
+    config = stori_jax.Config(action_noise=stori_jax.ActionNoise(1.0), granularity="frame")
+    with stori_jax.make("Breakout", config=config, num_envs=2, seed=0, num_workers=0, obs="ram",
+                        max_episode_frames=6, autoreset=autoreset) as env:
+        obs, _ = env.reset()
+        row = play(env, obs, 0, max_steps=6)
+    assert row["corrupted_fraction"] == 1.0
+    # episodes of 2 steps (4 + 2 frames), then (autoreset=False) a reset step
+    per_env = 3 * 6 if autoreset else 2 * 6
+    assert row["corrupted_actions"] == row["action_draws"] == 2 * per_env
+
+
 def test_a_suite_run_replaces_an_earlier_runs_files_and_nothing_else(tmp_path, capsys,
                                                                      monkeypatch):
     out = tmp_path / "suite"
@@ -457,6 +475,20 @@ def test_the_twin_plays_the_intended_actions_and_flags_are_the_presets():
         assert f["masked"] == bool(np.asarray(infos[t]["obs_masked"])[0]), t
         assert f["corrupted"] == bool(np.asarray(infos[t]["action_corrupted"]).any()), t
     assert {f["masked"] for f in frames} == {False, True}
+
+
+def test_the_executed_actions_shown_are_those_of_the_frames_played(monkeypatch):
+    """An episode cut at frame 6 (steps of 4 frames) ends 2 frames into its second step: the
+    caption's executed actions are those 2 frames' (not NOOPs for frames never played)."""
+    import functools
+
+    from stori_jax.visual import twin_run
+
+    monkeypatch.setattr(stori_jax, "make", functools.partial(stori_jax.make,
+                                                             max_episode_frames=6))
+    config = stori_jax.Config(action_noise=stori_jax.ActionNoise(0.5), granularity="frame")
+    frames = twin_run("Breakout", config, 5, seed=0, with_twin=False)
+    assert [len(f["executed"]) for f in frames[1:]] == [4, 2]
 
 
 def test_a_contact_sheets_top_row_is_the_twin_and_its_bottom_row_the_preset(tmp_path):
