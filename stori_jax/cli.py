@@ -64,8 +64,8 @@ def _cmd_run(args) -> int:
     print(f"events fired      : {stats['events_fired']}")
     print(f"corrupted actions : {stats['corrupted_actions']} of {stats['action_draws']} "
           f"({stats['corrupted_fraction']:.2f}; one draw per "
-          f"{'emulator frame' if env.plan.per_frame else 'agent step'}; a replacement may be "
-          "the intended action itself)")
+          f"{'emulator frame' if env.plan.per_frame else 'agent step'} played; a replacement "
+          "may be the intended action itself)")
     print(f"concept switches  : {stats['concept_switches']}")
     print(f"masked obs        : {stats['masked_obs']} of {env_steps}")
     rate, timed = stats["env_steps_per_s"], stats["timed_agent_steps"] * env.num_envs
