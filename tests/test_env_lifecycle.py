@@ -1116,3 +1116,107 @@ def test_workers_stop_when_their_parent_is_killed(tmp_path):
         for pid in pids:  # the forked child, and workers that outlived their parent
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
+
+
+def test_close_removes_the_state_files_of_an_interrupted_restore(tmp_path, monkeypatch):
+    """A restore stopped by Ctrl-C leaves its state files for the workers still to read them;
+    close() removes them (nothing else will)."""
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    env = make("Breakout")
+    try:
+        env.reset()
+        snapshot = env.snapshot()
+        signal_after(env.backend, "_send_each")  # the workers have the files' names
+        with ctrl_c_armed(), pytest.raises(KeyboardInterrupt):
+            env.restore(snapshot)
+        assert list(tmp_path.glob("stori-jax-restore-*"))
+    finally:
+        env.close()
+    assert list(tmp_path.glob("stori-jax-restore-*")) == []
+
+
+@pytest.mark.timeout(30)
+def test_a_worker_that_fails_a_restore_closes_the_env():
+    """A damaged emulator state passes the env's own checks (it is bytes, as ALE's are) and
+    fails in its worker: the restore raises WorkerError naming that worker, and the
+    env is closed, every worker stopped, as after a worker's death."""
+    env = make("Breakout", num_workers=2, inline_envs=0)
+    pids = list(env.backend.pids)
+    try:
+        env.reset()
+        snapshot = env.snapshot()
+        snapshot["emulators"] = [dict(e) for e in snapshot["emulators"]]
+        snapshot["emulators"][0]["ale"] = b"not an ALE state"
+        with pytest.raises(stori_jax.WorkerError, match=r"emulator worker 0 \(envs 0\.\.0\) "
+                                                        r"failed during a restore"):
+            env.restore(snapshot)
+        assert env.closed
+        assert wait_gone(pids, 3.0)
+        with pytest.raises(stori_jax.EnvClosedError):
+            env.step(np.zeros(2, np.int32))
+    finally:
+        env.close()
+
+
+def test_an_interrupted_start_leaves_no_worker(monkeypatch):
+    """Ctrl-C while make() waits for its workers to start: the workers are stopped there, even
+    while the interrupt (whose traceback holds the half-made backend) is kept."""
+    from stori_jax.backends import subproc
+
+    real_wait = subproc.wait
+
+    def interrupted_wait(*args, **kwargs):  # the first wait: the one for the start
+        monkeypatch.setattr(subproc, "wait", real_wait)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(subproc, "wait", interrupted_wait)
+    with pytest.raises(KeyboardInterrupt) as caught:
+        make("Breakout", num_workers=2, inline_envs=0)
+    tb, backend = caught.value.__traceback__, None
+    while tb is not None:  # the backend being made, from the frames of its __init__
+        if isinstance(tb.tb_frame.f_locals.get("self"), subproc.SubprocBackend):
+            backend = tb.tb_frame.f_locals["self"]
+        tb = tb.tb_next
+    assert backend is not None and len(backend.pids) == 2
+    try:
+        assert backend.closed
+        assert wait_gone(backend.pids, 3.0)
+    finally:
+        backend.close()
+
+
+def test_a_reset_straight_after_an_interrupt_inside_inline_emulation():
+    """The env of test_an_interrupt_inside_inline_emulation_requires_a_reset, reset without
+    the recv() that reports the broken step first: reset() finishes the step itself and gives
+    what the reset after that recv() gives."""
+    import jax
+
+    kw = dict(num_envs=3, num_workers=1, inline_envs=2)
+    env, twin = make("Breakout", **kw), make("Breakout", **kw)
+    try:
+        for e in (env, twin):
+            e.reset()
+            with interrupting(e.backend._inline[1], "step"), pytest.raises(KeyboardInterrupt):
+                e.step(np.zeros(3, np.int32))
+        with pytest.raises(stori_jax.InterruptedStepError):
+            twin.recv()
+        got, expected = env.reset(), twin.reset()  # (obs, info): every array alike
+        for x, y in zip(jax.tree.leaves(got), jax.tree.leaves(expected), strict=True):
+            np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+        for t in range(3):
+            actions = np.array([t % 4, 1, 3], np.int32)
+            np.testing.assert_array_equal(np.asarray(env.step(actions)[4]["ram"]),
+                                          np.asarray(twin.step(actions)[4]["ram"]))
+    finally:
+        env.close()
+        twin.close()
+
+
+def test_the_context_manager_closes_on_an_error_and_lets_it_through():
+    with pytest.raises(ValueError, match="inside the block"):
+        with make("Breakout", num_workers=0) as env:
+            env.reset()
+            raise ValueError("inside the block")
+    assert env.closed

@@ -517,3 +517,82 @@ def test_the_step_that_resets_a_single_env_reports_reward_0():
         np.testing.assert_array_equal(obs, first)
     finally:
         env.close()
+
+
+@pytest.mark.parametrize("vector", [False, True])
+def test_close_stops_the_worker_processes(vector):
+    """close() closes the stori_jax env inside, whose workers stop then (not when the garbage
+    collector finds it)."""
+    from _env_support import wait_gone
+
+    env = (gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, obs="ram", num_workers=1)
+           if vector else gym.make("stori_jax/Breakout-3.1-v0", obs="ram", num_workers=1))
+    inner = env._env if vector else env.unwrapped._env
+    pids = list(inner.backend.pids)
+    assert len(pids) == 1
+    try:
+        env.reset(seed=0)
+        env.close()
+        assert inner.closed
+        assert wait_gone(pids, 3.0)
+    finally:
+        inner.close()
+
+
+FORK_BEFORE_JAX_STARTED = """
+import os, sys
+import jax, stori_jax  # imported: JAX's modules are loaded, but none of its backends is made
+
+pid = os.fork()
+if pid == 0:
+    try:
+        env = stori_jax.make("Breakout", num_envs=1, seed=0, obs="ram", num_workers=0)
+        env.reset()
+        env.close()
+    except BaseException as error:
+        print("child:", type(error).__name__, error, flush=True)
+        os._exit(1)
+    print("child made and reset an env", flush=True)
+    os._exit(0)
+_, status = os.waitpid(pid, 0)
+sys.exit(os.waitstatus_to_exitcode(status))
+"""
+
+
+def test_a_process_forked_before_jax_started_may_make_an_env():
+    """Importing JAX starts none of its threads: a child forked after the import alone is
+    free to make an env (only a fork after JAX started is refused)."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", FORK_BEFORE_JAX_STARTED], capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == 0, out.stdout + out.stderr[-3000:]
+    assert out.stdout.strip() == "child made and reset an env", out.stdout + out.stderr[-3000:]
+
+
+def test_a_vector_env_whose_worker_died_steps_only_after_a_reset_from_its_seed():
+    """test_reset_after_a_worker_died_makes_the_env_again_from_its_seed, of a vector env: the
+    step after the death names reset(), which makes the env again, as a fresh one starts."""
+    import os
+    import signal
+
+    kw = dict(num_envs=2, obs="ram", num_workers=1)
+    envs = gym.make_vec("stori_jax/Breakout-2.1-v0", **kw)
+    fresh = gym.make_vec("stori_jax/Breakout-2.1-v0", **kw)
+    actions = np.zeros(2, np.int64)
+    try:
+        envs.reset()
+        os.kill(envs._env.backend.pids[0], signal.SIGKILL)
+        with pytest.raises(stori_jax.WorkerError, match="died"):
+            for _ in range(50):  # the death is noticed at the next command
+                envs.step(actions)
+        with pytest.raises(stori_jax.EnvClosedError, match=r"worker of this environment died.*"
+                                                           r"reset\(\) makes the env again"):
+            envs.step(actions)
+        obs, _ = envs.reset()
+        np.testing.assert_array_equal(obs, fresh.reset()[0])
+        np.testing.assert_array_equal(envs.step(actions)[0], fresh.step(actions)[0])
+    finally:
+        envs.close()
+        fresh.close()

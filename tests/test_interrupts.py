@@ -144,3 +144,94 @@ def test_a_ctrl_c_python_dropped_in_a_gc_callback_stops_the_next_env_call():
     finally:
         env.close()
         twin.close()
+
+
+@pytest.fixture
+def unraisable_seen(monkeypatch):
+    """A recording sys.unraisablehook, in place before an env installs its own on top (the
+    module's record of the hook it forwards to is put back after the test too)."""
+    import sys
+
+    from stori_jax.backends import interrupts
+
+    seen = []
+    monkeypatch.setattr(interrupts, "_forward_to", list(interrupts._forward_to))
+    monkeypatch.setattr(sys, "unraisablehook", seen.append)
+    return seen
+
+
+class _RaisesWhenDropped:
+    """Raises ``error`` in its ``__del__``, where Python cannot propagate it: an "Exception
+    ignored" handed to sys.unraisablehook (as a Ctrl-C landing there is)."""
+
+    def __init__(self, error):
+        self.error = error
+
+    def __del__(self):
+        raise self.error
+
+
+def test_the_hook_in_place_before_the_env_still_sees_every_unraisable_exception(
+        unraisable_seen):
+    """The env notes a Ctrl-C Python dropped, and still hands every "Exception ignored" (the
+    Ctrl-C too) to the hook that was in place before it: a user's, or pytest's."""
+    import numpy as np
+
+    import stori_jax
+
+    with stori_jax.make("Breakout", num_envs=1, seed=0, obs="ram", num_workers=0) as env:
+        env.reset()
+        _RaisesWhenDropped(KeyboardInterrupt())
+        _RaisesWhenDropped(ValueError("a __del__ that fails"))
+        assert [type(u.exc_value) for u in unraisable_seen] == [KeyboardInterrupt, ValueError]
+        with pytest.raises(KeyboardInterrupt, match="garbage-collection callback or a __del__"):
+            env.step(np.zeros(1, np.int32))
+        assert env.step(np.zeros(1, np.int32))[0].shape == (1, 128)  # raised once
+
+
+def test_an_ordinary_error_python_dropped_is_no_ctrl_c(unraisable_seen):
+    """A __del__ or a garbage-collection callback that fails with any other exception during a
+    step is only printed: the env's next step runs, as an undisturbed twin's."""
+    import gc
+
+    import numpy as np
+
+    import stori_jax
+
+    env, twin = (stori_jax.make("Breakout", num_envs=2, seed=0, obs="ram", num_workers=0)
+                 for _ in range(2))
+
+    def failing_gc_callback(phase, info):
+        raise ValueError("a garbage-collection callback that fails")
+
+    try:
+        env.reset()
+        twin.reset()
+        actions = np.array([1, 3], np.int32)
+        emulator, real_step = env.backend._inline[0], env.backend._inline[0].step
+
+        def step_with_a_failing_cleanup():  # inside the step, where a collection may run
+            _RaisesWhenDropped(ValueError("a __del__ that fails"))
+            gc.callbacks.append(failing_gc_callback)
+            try:
+                gc.collect()
+            finally:
+                gc.callbacks.remove(failing_gc_callback)
+            real_step()
+
+        emulator.step = step_with_a_failing_cleanup
+        first = env.step(actions)
+        emulator.step = real_step
+        assert [type(u.exc_value) for u in unraisable_seen] == [ValueError] * 3
+        try:
+            expected = twin.step(actions)
+            for got, want in zip(first[:4], expected[:4]):
+                np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+            for _ in range(2):
+                for got, want in zip(env.step(actions)[:4], twin.step(actions)[:4]):
+                    np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+        except KeyboardInterrupt:  # a test failure, not the whole session stopped
+            pytest.fail("an ordinary error Python dropped was raised as a Ctrl-C")
+    finally:
+        env.close()
+        twin.close()
