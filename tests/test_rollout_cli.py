@@ -41,6 +41,30 @@ def test_rollout_stacks_time_major_and_is_deterministic():
         np.testing.assert_array_equal(a, b)
 
 
+def test_a_rollout_is_what_the_env_gives_for_the_policy_s_actions():
+    """Step by step, a twin env of the seed stepped with the trajectory's actions gives its
+    observations (each the one its action was chosen from), rewards and end flags (episodes
+    cut at 40 frames: truncations inside the rollout); each action is the policy's draw from
+    step t's key of the documented chain (key, step key = split(key))."""
+    params, key, steps = {"num_actions": 4}, jax.random.PRNGKey(3), 14
+    kw = dict(num_envs=2, seed=5, obs="atari84", max_episode_frames=40)
+    with stori_jax.make("Breakout", "1", **kw) as env:
+        traj = stori_jax.rollout(env, random_policy, params, key, steps)
+    with stori_jax.make("Breakout", "1", **kw) as twin:
+        obs, _ = twin.reset()
+        for t in range(steps):
+            key, step_key = jax.random.split(key)
+            np.testing.assert_array_equal(traj.action[t], random_policy(params, obs, step_key))
+            np.testing.assert_array_equal(traj.obs[t], obs, err_msg=f"obs {t}")
+            obs, reward, terminated, truncated, _ = twin.step(traj.action[t])
+            np.testing.assert_array_equal(traj.reward[t], reward)
+            np.testing.assert_array_equal(traj.terminated[t], terminated, err_msg=f"{t}")
+            np.testing.assert_array_equal(traj.truncated[t], truncated, err_msg=f"{t}")
+    np.testing.assert_array_equal(traj.last_obs, obs)
+    np.testing.assert_array_equal(traj.last_key, key)
+    assert np.asarray(traj.truncated).any()  # the flags were tested where they differ
+
+
 def test_a_rollout_continued_from_its_last_key_and_obs_is_one_long_rollout():
     params = {"num_actions": 4}
     with stori_jax.make("Breakout", "1", num_envs=2, seed=4, obs="ram") as env:
