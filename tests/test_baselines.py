@@ -10,6 +10,7 @@ import pickle
 import re
 import shutil
 import warnings
+from pathlib import Path
 
 import ale_py
 import jax
@@ -1763,3 +1764,128 @@ def test_cli_train_evaluates_the_sampled_policy_of_its_checkpoint(tmp_path, monk
     assert json.loads((tmp_path / "eval-sampled.json").read_text())["episodes"] == 2
     assert main(again[:-6] + ["--out", str(tmp_path), "--resume", "--force"]) == 2
     assert "--force replaces an evaluation: it needs --eval-episodes" in capsys.readouterr().err
+
+
+def test_evaluate_asks_the_checkpoint_for_the_policy_it_was_given(uninterrupted, monkeypatch):
+    """evaluate(policy="greedy") played the checkpoint's greedy policy only if it asked for it:
+    policy_of's default is the sampled one."""
+    full, _ = uninterrupted
+    asked, real = [], ppo.policy_of
+
+    def spy(ckpt, *args, **kwargs):
+        asked.append(args[0] if args else kwargs.get("mode", "sampled"))
+        return real(ckpt, *args, **kwargs)
+
+    monkeypatch.setattr(ppo, "policy_of", spy)
+    for policy in ("greedy", "sampled"):
+        result = evaluate("Breakout", "1", policy=policy, episodes=1, num_envs=1,
+                          checkpoint=full / "checkpoint.pkl", max_episode_frames=40,
+                          progress=False)
+        assert result["policy"] == policy
+    assert asked == ["greedy", "sampled"]
+
+
+def test_overrides_read_1_and_0_as_true_and_false():
+    config = ppo.PPOConfig.from_overrides(tiny(anneal_lr=False, clip_vloss=True),
+                                          {"anneal_lr": "1", "clip_vloss": "0"})
+    assert (config.anneal_lr, config.clip_vloss) == (True, False)
+    config = ppo.PPOConfig.from_overrides(tiny(anneal_lr=False, clip_vloss=True),
+                                          {"anneal_lr": "TRUE", "clip_vloss": "False"})
+    assert (config.anneal_lr, config.clip_vloss) == (True, False)
+
+
+def test_runs_that_differ_only_in_their_checkpoints_are_not_noted_as_differing(tmp_path):
+    """checkpoint_every (like the seed) does not change the training: runs pooled in a panel
+    that differ in it alone get no note; a hyperparameter that changes training does."""
+    from baselines.table import table_notes
+
+    for preset, seed, fields in (("3.1", 0, dict(checkpoint_every=1)),
+                                 ("3.1", 7, dict(checkpoint_every=5)),
+                                 ("1", 0, dict(learning_rate=1e-3)), ("1", 7, {})):
+        fake_training_run(tmp_path, preset, seed, [1.0, 2.0])
+        config = tmp_path / f"Breakout-{preset}" / f"ppo-seed{seed}" / "config.json"
+        config.write_text(json.dumps(dict(json.loads(config.read_text()), **fields)))
+        fake_eval(tmp_path, "Breakout", preset, "ppo", seed, 1.0)
+    notes = table_notes(learning_curves(tmp_path), load_evaluations(tmp_path), "sampled")
+    assert notes == ["Breakout 1: the runs pooled in the curves (and, where evaluated, in the "
+                     "table's mean) differ in learning_rate"]
+
+
+def test_cli_table_shows_the_policy_asked_for_and_writes_into_the_results_dir(tmp_path,
+                                                                              capsys):
+    """stori-jax table RESULTS_DIR --policy greedy: the greedy evaluations, in a column named
+    so; without --out, table.md and table.json land in RESULTS_DIR itself."""
+    for seed, mean in ((0, 1.0), (7, 3.0)):
+        fake_eval(tmp_path, "Breakout", "3.1", "ppo", seed, mean)
+        fake_eval(tmp_path, "Breakout", "3.1", "ppo", seed, 10.0 * mean, policy="greedy")
+    assert main(["table", str(tmp_path), "--policy", "greedy"]) == 0
+    out = capsys.readouterr().out
+    assert "| PPO greedy (ours) |" in out and "| 20.00 ± 14.14 |" in out
+    written = (tmp_path / "table.md").read_text()
+    assert "| PPO greedy (ours) |" in written and "| 20.00 ± 14.14 |" in written
+    assert json.loads((tmp_path / "table.json").read_text())["ppo_policy"] == "greedy"
+    assert not (tmp_path / "table").exists()
+    assert f"wrote {tmp_path / 'table.md'}, {tmp_path / 'table.json'}" in out
+
+
+def test_cli_eval_of_a_checkpoints_greedy_policy_writes_eval_greedy_beside_it(
+        uninterrupted, tmp_path, monkeypatch):
+    """eval --checkpoint --policy greedy, without --out: eval-greedy.json, of the greedy
+    policy, in the checkpoint's folder."""
+    monkeypatch.chdir(tmp_path)  # nothing is written elsewhere
+    full, _ = uninterrupted
+    run = tmp_path / "run"
+    run.mkdir()
+    shutil.copy(full / "checkpoint.pkl", run / "checkpoint.pkl")
+    assert main(["eval", "--checkpoint", str(run / "checkpoint.pkl"), "--policy", "greedy",
+                 "--episodes", "1", "--num-envs", "1", "--max-episode-frames", "40",
+                 "--quiet"]) == 0
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["checkpoint.pkl", "eval-greedy.json",
+                                                            "run"]
+    assert json.loads((run / "eval-greedy.json").read_text())["policy"] == "greedy"
+
+
+def test_cli_default_run_folders_are_filed_under_the_seed(tmp_path, monkeypatch):
+    """Without --out: train writes results/train/<game>-<preset>/ppo-seed<S>, eval --random
+    results/train/<game>-<preset>/random-seed<S>, S the --seed given."""
+    import baselines.evaluate
+
+    monkeypatch.chdir(tmp_path)
+    trained_into = []
+
+    def train(config, out, resume, progress):
+        trained_into.append(out)
+        return dict(iterations_now=1, agent_steps=config.total_steps, train_seconds=1.0,
+                    train_sps=1.0)
+
+    def evaluate(game, preset, **kwargs):
+        return dict(game=game, preset=preset, agent="random", policy=kwargs["policy"],
+                    train_seed=kwargs["seed"], mean_return=1.0, std_return=0.5, truncated=0,
+                    episodes=kwargs["episodes"], eval_seed=10_007)
+
+    monkeypatch.setattr(ppo, "train", train)
+    monkeypatch.setattr(baselines.evaluate, "evaluate", evaluate)
+    assert main(["train", "ppo", "--game", "Breakout", "--seed", "7", "--set", "num_envs=2",
+                 "--set", "num_steps=8", "--steps", "16", "--quiet"]) == 0
+    assert trained_into == [Path("results/train/Breakout-3.1/ppo-seed7")]
+    assert main(["eval", "--random", "--game", "Breakout", "--preset", "3.1", "--seed", "7",
+                 "--episodes", "1", "--quiet"]) == 0
+    written = tmp_path / "results" / "train" / "Breakout-3.1" / "random-seed7" / "eval-random.json"
+    assert json.loads(written.read_text())["train_seed"] == 7
+    assert [p for p in tmp_path.rglob("*") if p.is_file()] == [written]
+
+
+def test_cli_train_says_when_steps_round_up_to_whole_iterations(tmp_path, monkeypatch, capsys):
+    def train(config, out, resume, progress):
+        return dict(iterations_now=config.num_iterations,
+                    agent_steps=config.num_iterations * config.batch_size, train_seconds=1.0,
+                    train_sps=1.0)
+
+    monkeypatch.setattr(ppo, "train", train)
+    args = ["train", "ppo", "--game", "Breakout", "--set", "num_envs=2", "--set", "num_steps=8",
+            "--quiet"]
+    assert main([*args, "--steps", "50", "--out", str(tmp_path / "a")]) == 0
+    assert ("stori-jax: --steps 50 rounds up to 64 agent steps, whole iterations of num_envs x "
+            "num_steps = 16") in capsys.readouterr().err
+    assert main([*args, "--steps", "48", "--out", str(tmp_path / "b")]) == 0
+    assert "rounds up" not in capsys.readouterr().err

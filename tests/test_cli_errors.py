@@ -32,7 +32,8 @@ def files(tmp_path):
         format="stori-jax-ppo-1", params={}, config=dict(game="Breakout", gamma=2.0))))
     for name, content in (("num", 5), ("list", [1]), ("types", dict(EVAL, mean_return="abc")),
                           ("seed", dict(EVAL, train_seed=-1)), ("dqn", dict(EVAL, agent="dqn")),
-                          ("mixed", dict(EVAL, policy="greedy"))):
+                          ("mixed", dict(EVAL, policy="greedy")),
+                          ("episodes", dict(EVAL, episodes=0))):
         (tmp_path / f"tb_{name}").mkdir()
         (tmp_path / f"tb_{name}" / "eval-x.json").write_text(json.dumps(content))
     run = tmp_path / "tb_curve" / "run"
@@ -113,12 +114,24 @@ def test_corrupt_checkpoints_say_why(name, why, files, capsys):
     ("tb_seed", "train_seed must be >= 0, got -1"),
     ("tb_dqn", "agent must be one of ['ppo', 'random'], got 'dqn'"),
     ("tb_mixed", "policy 'greedy' does not go with agent 'random'"),
+    ("tb_episodes", "eval-x.json: episodes must be >= 1, got 0"),
     ("tb_curve", "run/episodes.csv lacks the columns ['global_step', 'return']"),
 ])
 def test_malformed_results_are_named(tree, message, files, capsys):
     err = run_main(["table", f"D/{tree}", "--out", "D/tables"], files, capsys)
     assert f"D/{tree}/" in err and message in err
     assert not (files / "tables" / "table.md").exists(), "found before anything is written"
+
+
+def test_a_negative_eval_episodes_is_refused_before_training(files, capsys, monkeypatch):
+    import baselines.ppo
+
+    monkeypatch.chdir(files)  # nothing is written elsewhere
+    monkeypatch.setattr(baselines.ppo, "train", lambda *a, **k: pytest.fail("trained"))
+    err = run_main(["train", "ppo", "--game", "Breakout", "--eval-episodes", "-1", "--out",
+                    "D/run", "--quiet"], files, capsys)
+    assert "--eval-episodes must be >= 0, got -1" in err
+    assert not (files / "run").exists()
 
 
 def test_resume_from_a_checkpoint_without_its_run_state_says_what_is_missing(files, capsys):

@@ -108,6 +108,15 @@ def test_mutual_information_inputs_are_validated():
     assert mutual_information([0.5, 0.5], [[1.0, 0.0, 0.0], [0.0, 0.5, 0.5]]) == pytest.approx(1.0)
 
 
+def test_a_distribution_off_by_more_than_rounding_is_refused():
+    """Sums are allowed 1e-6 of rounding, not 1e-4."""
+    with pytest.raises(ValueError, match=r"input_dist must sum to 1 \(within 1e-06\)"):
+        mutual_information([0.5, 0.5 + 1e-4], np.eye(2))
+    with pytest.raises(ValueError, match=r"channel rows must sum to 1"):
+        mutual_information([0.5, 0.5], [[1.0, 0.0], [0.0, 1.0 - 1e-4]])
+    assert mutual_information([0.5, 0.5 + 1e-7], np.eye(2)) == pytest.approx(1.0, abs=1e-6)
+
+
 def test_channel_matrix_replacement_is_validated_and_repeats_count():
     # functional.corrupt_actions draws uniformly from the replacement tuple by position, so a
     # repeated id weighs more; the rows used to sum to 1 - p/2 for [1, 1]

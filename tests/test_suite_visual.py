@@ -269,7 +269,8 @@ class _TwoPaceEnv:
         self.t += 1
         done = np.array([True, self.t % 5 == 0])
         info = dict(episode_return=np.where(done, [1.0, 10.0], 0.0), event_fired=np.zeros(2),
-                    action_corrupted=np.zeros((2, 1), bool), obs_masked=np.zeros(2, bool),
+                    action_corrupted=np.zeros((2, 1), bool), frames_played=np.full(2, 4),
+                    obs_masked=np.zeros(2, bool),
                     concept=np.zeros(2, np.int32))
         return np.zeros((2, 1)), np.zeros(2), done, np.zeros(2, bool), info
 
@@ -419,7 +420,8 @@ class _SwitchingEnv:
         concept, done, events = (np.array(x) for x in self.script[self.t])
         self.t += 1
         info = dict(episode_return=np.where(done, 1.0, 0.0), event_fired=events,
-                    action_corrupted=np.zeros((2, 1), bool), obs_masked=np.zeros(2, bool),
+                    action_corrupted=np.zeros((2, 1), bool), frames_played=np.full(2, 4),
+                    obs_masked=np.zeros(2, bool),
                     concept=concept.astype(np.int32))
         return np.zeros((2, 1)), np.zeros(2), done, np.zeros(2, bool), info
 
@@ -667,3 +669,27 @@ def test_the_table_says_why_a_row_has_fewer_episodes_than_asked(tmp_path):
                  "--no-gallery"]) == 0
     assert "Fewer than 1 episode in Breakout 3.2A: each run stopped at --max-steps 5" in (
         out / "table.md").read_text()
+
+
+def test_suite_no_gallery_and_num_envs_reach_the_run(tmp_path, capsys):
+    """--no-gallery: no contact sheet and no gallery line in table.md; --num-envs: the envs
+    stepped (recorded in results.json; blackout at p = 1 masks every env's every step)."""
+    out = tmp_path / "suite"
+    assert main(["suite", "--games", "Breakout", "--presets", "3.2A", "--episodes", "1",
+                 "--num-envs", "2", "--max-steps", "10", "--out", str(out), "--quiet",
+                 "--no-gallery"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["results.json", "table.md"]
+    assert "Gallery" not in (out / "table.md").read_text()
+    assert f"wrote {out}/table.md, {out}/results.json\n" in capsys.readouterr().out
+    results = json.loads((out / "results.json").read_text())
+    assert results["num_envs"] == 2
+    row, = results["rows"]
+    assert row["masked_obs"] == 2 * row["agent_steps"] > 0
+
+
+def test_run_counts_masked_obs_over_every_envs_steps(capsys):
+    """`run` printed the masked observations out of --steps, not of the --steps x --num-envs
+    observations played (blackout at p = 1 masks them all)."""
+    assert main(["run", "Breakout", "3.2A", "--steps", "3", "--num-envs", "2",
+                 "--num-workers", "0", "--quiet"]) == 0
+    assert "masked obs        : 6 of 6\n" in capsys.readouterr().out
