@@ -76,6 +76,34 @@ def test_cyclic_drift_to_a_ram_obs_mode_alternates_every_T_steps():
     assert not ev.reset_info["obs_masked"].any()
 
 
+def test_sudden_drift_to_a_ram_obs_mode_leaves_each_episodes_first_observation_true():
+    """Boxing, sudden T = 3 to RAM mode 2 (hide enemy) at p = 1, episodes of 10 steps
+    (max_episode_frames 40), autoreset: steps 3..9 of each episode are concept 2, and every
+    one but the last is rendered; the observation returned with a truncation is the next
+    episode's first, seen under concept 1: the true screen, the twin's and the first reset's,
+    not rendered (obs_masked False) though the ending step was under concept 2."""
+    steps, T = 22, 3
+    config = drift("sudden", T, Config(observation=ObservationMask("ram", 2, 1.0)))
+    actions = random_actions(18, steps, 2, seed=23)
+    ev, twin = lockstep_with_twin("Boxing", config, steps, lambda k, runs: actions[k],
+                                  obs="raw", max_episode_frames=40)
+    np.testing.assert_array_equal(ev.ram, twin.ram)
+    episode_step = np.arange(steps) % 10
+    concept = ev.stacked("concept")
+    np.testing.assert_array_equal(concept, np.repeat((episode_step >= T)[:, None], 2, 1))
+    truncated = ev.stacked("truncated")
+    np.testing.assert_array_equal(truncated, np.repeat((episode_step == 9)[:, None], 2, 1))
+    masked = ev.stacked("obs_masked")
+    np.testing.assert_array_equal(masked, (concept == 1) & ~truncated)
+    assert not ev.reset_info["obs_masked"].any()
+    obs, twin_obs = ev.stacked("obs"), twin.stacked("obs")
+    np.testing.assert_array_equal(obs[~masked], twin_obs[~masked])
+    assert (obs[masked] != twin_obs[masked]).any(axis=(1, 2, 3)).all()
+    np.testing.assert_array_equal(ev.reset_obs, twin.reset_obs)
+    for k in np.nonzero(truncated[:, 0])[0]:
+        np.testing.assert_array_equal(obs[k], ev.reset_obs, err_msg=f"step {k}")
+
+
 def test_drift_to_action_noise_restarts_after_autoreset():
     """Sudden T = 3 to type 1 with p = 1 at step granularity, episodes of 8 steps: corruption
     happens exactly on episode steps 3..7 of every episode."""

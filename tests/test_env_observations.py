@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -17,8 +18,8 @@ from stori_jax import Config, ObservationMask, get_game
 from stori_jax.env import emulator_seeds
 from stori_jax.plan import compile_plan
 
-from _env_support import (binomial_ok, breakout_tracker, lockstep_with_twin, make, new_ale,
-                          random_actions, run_env, run_lockstep)
+from _env_support import (binomial_ok, breakout_tracker, last_ram, lockstep_with_twin, make,
+                          new_ale, random_actions, run_env, run_lockstep)
 
 STEPS = 30
 BOXING_RING = (110, 156, 66)
@@ -241,6 +242,50 @@ def test_ram_obs_mode_shows_the_next_noop_frame_of_the_written_ram(game, mode):
         assert len(met) - sum(met) >= 50, "the condition should be unmet often too"
 
 
+def test_ram_obs_mode_at_step_granularity_renders_both_pooled_screens():
+    """Step granularity, frame_skip 4, Boxing hide player (RAM mode 3, 1 <- 214) at p = 1,
+    beside a bare emulator: one decision covers the step, and BOTH screens max-pooled into its
+    observation are rendered from the written RAM (each the next NOOP frame after frame 3 and
+    after frame 4).  Rendering only the last one let the true screen 3 show the white player
+    through the max-pool."""
+    seed, steps = 5, 15
+    config = Config(observation=ObservationMask("ram", 3, 1.0), granularity="step")
+    env = stori_jax.make("Boxing", config=config, obs="raw", num_envs=1, seed=seed,
+                         num_workers=1, inline_envs=0)
+    ale = new_ale(get_game("Boxing").rom_id, emulator_seeds(seed, 1)[0])
+    actions = ale.getMinimalActionSet()
+
+    def rendered():
+        state = ale.cloneState()
+        ale.setRAM(1, 214)
+        ale.act(actions[0])
+        screen = ale.getScreenRGB().copy()
+        ale.restoreState(state)
+        return screen
+
+    true_player_shows = 0
+    try:
+        assert not env.plan.per_frame
+        obs, info = env.reset()
+        ale.reset_game()
+        np.testing.assert_array_equal(np.asarray(obs)[0], rendered(), err_msg="reset")
+        for t, a in enumerate(random_actions(len(actions), steps, 1, seed=3)[:, 0]):
+            obs, _, _, _, info = env.step(np.array([a], np.int32))
+            screens, truth = [], []
+            for _ in range(4):
+                ale.act(actions[a])
+                truth.append(ale.getScreenRGB().copy())
+                screens.append(rendered())
+            assert not ale.game_over() and bool(np.asarray(info["obs_masked"])[0])
+            np.testing.assert_array_equal(np.asarray(obs)[0], np.maximum(screens[2], screens[3]),
+                                          err_msg=f"step {t}")
+            last_only = np.maximum(truth[2], screens[3])
+            true_player_shows += not np.array_equal(last_only, np.asarray(obs)[0])
+    finally:
+        env.close()
+    assert true_player_shows > steps // 2
+
+
 def test_ram_obs_mode_renders_the_first_observation_after_an_autoreset():
     """At p = 1 the first observation of every episode is rendered too: the observation
     returned with a truncation (max_episode_frames 40 = 10 steps) equals the first reset's."""
@@ -318,14 +363,18 @@ def test_boxing_hiding_a_boxer_hides_its_score(mode, score, colour):
     assert (digit_pixels(all_obs(run)) == 0).all()
 
 
-def test_a_ram_mode_shows_boxings_colour_flip():
+@pytest.mark.parametrize("mode,address", [(1, 3), (2, 2), (3, 1)])
+def test_a_ram_mode_shows_boxings_colour_flip(mode, address):
     """STORI_SPEC 6 and 4.2 on a bare emulator beside the env: the flip's colours are written
     before EVERY frame, the hidden NOOP frame of a RAM mode included (it showed the game's own
     colours: a flip combined with a RAM mode was invisible whenever the mode rendered). Colour
-    flip at p = 1 toggles every frame; RAM mode 1 (hide the ring) renders every observation."""
+    flip at p = 1 toggles every frame; the RAM mode renders every observation: mode 1 (hide the
+    ring, RAM 3) or mode 2 / 3 (hide the enemy / player: RAM 2 / 1, which the flip writes too).
+    The flip's standing writes come first, the mode's own last: a hidden boxer stays hidden
+    (the flip's colour written over the mode's 214 showed it)."""
     from stori_jax import RandomEvent
 
-    config = Config(event=RandomEvent(1, 1.0), observation=ObservationMask("ram", 1, 1.0))
+    config = Config(event=RandomEvent(1, 1.0), observation=ObservationMask("ram", mode, 1.0))
     env = stori_jax.make("Boxing", config=config, obs="raw", num_envs=1, seed=5, frame_skip=1,
                          num_workers=0)
     ale = new_ale(get_game("Boxing").rom_id, emulator_seeds(5, 1)[0])
@@ -338,8 +387,8 @@ def test_a_ram_mode_shows_boxings_colour_flip():
 
     def expected():
         state = ale.cloneState()
-        for address, value in {**colours(), 3: 214}.items():
-            ale.setRAM(address, value)
+        for written, value in {**colours(), address: 214}.items():
+            ale.setRAM(written, value)
         ale.act(actions[0])
         screen = ale.getScreenRGB().copy()
         ale.restoreState(state)
@@ -352,8 +401,8 @@ def test_a_ram_mode_shows_boxings_colour_flip():
         for t, a in enumerate(random_actions(len(actions), 40, 1, seed=3)[:, 0]):
             obs = np.asarray(env.step(np.array([a], np.int32))[0])[0]
             flipped = not flipped
-            for address, value in colours().items():
-                ale.setRAM(address, value)
+            for written, value in colours().items():
+                ale.setRAM(written, value)
             ale.act(actions[a])
             np.testing.assert_array_equal(obs, expected(), err_msg=f"step {t}")
             shown += flipped
@@ -471,6 +520,84 @@ def test_torch_shows_a_disc_of_radius_75_and_blacks_out_the_rest():
             seen, hidden = kept & (w != 0).any(-1), ~kept
             assert seen.any() and hidden.any()
             assert len(torch_centres(seen, hidden)), f"no disc explains step {t}, env {b}"
+
+
+def torch_screen(screen, centre):
+    """``screen`` with every pixel farther than 75 from ``centre`` (x, y) black (STORI_SPEC 4.1)."""
+    ys, xs = np.mgrid[:210, :160]
+    hidden = (xs - int(centre[0])) ** 2 + (ys - int(centre[1])) ** 2 > 75 ** 2
+    return np.where(hidden[..., None], np.uint8(0), screen)
+
+
+def test_torch_at_frame_granularity_gives_each_pooled_screen_its_own_disc():
+    """Breakout 3.2C (torch, p = 1, frame granularity) beside a bare emulator: every step's
+    observation is max(screen 3 seen through its own disc, screen 4 through its own), the two
+    centres the env's own draws for the step (core.before_step on its state), pixel for pixel.
+    (Both screens through the first screen's disc passes the one-disc test above.)"""
+    from stori_jax.core import before_step
+
+    seed, steps = 5, 12
+    env = stori_jax.make("Breakout", "3.2C", obs="raw", num_envs=1, seed=seed, num_workers=1,
+                         inline_envs=0)
+    ale = new_ale(get_game("Breakout").rom_id, emulator_seeds(seed, 1)[0])
+    actions = ale.getMinimalActionSet()
+    one_disc_differs = 0
+    try:
+        assert env.plan.per_frame and env.plan.frames_layout == "pair"
+        env.reset()
+        ale.reset_game()
+        for t, a in enumerate(random_actions(len(actions), steps, 1, seed=3)[:, 0]):
+            step = np.array([a], np.int32)
+            _, draws = before_step(env._jit_plan, env._state, jnp.asarray(step))
+            centres = np.asarray(draws.mask_centres)[0]
+            assert np.asarray(draws.mask_apply).all()
+            obs, _, _, _, info = env.step(step)
+            screens = []
+            for _ in range(4):
+                ale.act(actions[a])
+                screens.append(ale.getScreenRGB().copy())
+            assert not ale.game_over() and bool(np.asarray(info["obs_masked"])[0])
+            expected = np.maximum(torch_screen(screens[2], centres[0]),
+                                  torch_screen(screens[3], centres[1]))
+            np.testing.assert_array_equal(np.asarray(obs)[0], expected, err_msg=f"step {t}")
+            one_disc = np.maximum(torch_screen(screens[2], centres[0]),
+                                  torch_screen(screens[3], centres[0]))
+            one_disc_differs += not np.array_equal(one_disc, expected)
+    finally:
+        env.close()
+    assert one_disc_differs >= steps // 2, "the second disc should show on most steps"
+
+
+@pytest.mark.parametrize("preset,obs", [("3.2A", "atari84"), ("3.2B", "atari84"),
+                                        ("3.2C", "atari84"), ("3.2A", "dreamer64"),
+                                        ("3.2C", "dreamer64")])
+def test_resized_observations_are_of_the_masked_screen(preset, obs):
+    """atari84 and dreamer64 resize the masked screen, not the true one: beside an obs='raw'
+    env of the same preset, seed and actions, every observation (the reset's included) is
+    atari84_frame / dreamer64 of the raw one, at frame granularity (blackout, crop at p = 0.75,
+    torch).  A 3.1 twin checks that the mask did change the resized observation."""
+    from stori_jax.functional import atari84_frame, dreamer64
+
+    kw = dict(num_envs=2, seed=3, num_workers=0)
+    envs = [stori_jax.make("Breakout", preset, obs=obs, **kw),
+            stori_jax.make("Breakout", preset, obs="raw", **kw),
+            stori_jax.make("Breakout", obs="raw", **kw)]
+    try:
+        assert envs[0].plan.per_frame
+        runs = run_lockstep(envs, 40, lambda k, runs: breakout_tracker(last_ram(runs[1])))
+    finally:
+        for env in envs:
+            env.close()
+    resized, raw, twin = (all_obs(run) for run in runs)
+    np.testing.assert_array_equal(resized.shape[:2], raw.shape[:2])
+    resize = atari84_frame if obs == "atari84" else dreamer64
+    newest = resized[..., -1] if obs == "atari84" else resized
+    expected = np.stack([np.asarray(resize(r)) for r in raw])
+    np.testing.assert_array_equal(newest, expected)
+    unmasked = np.stack([np.asarray(resize(r)) for r in twin])
+    differs = (expected != unmasked).any(axis=tuple(range(2, expected.ndim)))
+    assert differs.any(), "the mask should change some resized observation"
+    assert np.array_equal(runs[1].ram, runs[2].ram)
 
 
 def test_mask_at_step_granularity_applies_per_step_with_probability_p():

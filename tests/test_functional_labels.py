@@ -151,3 +151,21 @@ def test_extract_labels_refuses_what_is_not_ram(ram, error):
     for ok in (np.zeros((2, 128), np.uint8), np.zeros((3, 2, 128), np.int32),
                np.zeros(128, np.uint16)):
         assert extract_labels("BankHeist", ok)["robber_x"].shape == ok.shape[:-1]
+
+
+@pytest.mark.parametrize("bad", [256, -1])
+def test_extract_labels_refuses_a_value_just_outside_a_byte(bad):
+    """A wide integer type must hold bytes: 256 or -1 anywhere is a ValueError naming the
+    range (the check is exactly [0, 255], no value off by one slips through), while 0 and 255,
+    the range's own ends, are accepted."""
+    ram = np.zeros((1, 128), np.int32)
+    ram[0, 99] = bad
+    with pytest.raises(ValueError, match=r"values in \[0, 255\]"):
+        extract_labels("Breakout", ram)
+    with pytest.raises(ValueError, match=r"values in \[0, 255\]"):
+        extract_labels("Breakout", np.full((1, 128), bad, np.int32))
+    for edge in (0, 255):
+        ram[0, 99] = edge
+        assert np.asarray(extract_labels("Breakout", ram)["ball_x"]).tolist() == [edge]
+        full = np.full((1, 128), edge, np.int32)
+        assert np.asarray(extract_labels("Breakout", full)["ball_x"]).tolist() == [edge]
