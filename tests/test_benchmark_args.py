@@ -39,14 +39,21 @@ def script(monkeypatch, name: str):
     ("jax_stages", ["--sizes", "50000000"], "choose a smaller --sizes"),
     ("xla_rollout", ["--sizes", "8", "50000000"], "choose a smaller --sizes"),
     ("throughput", ["--seconds", "inf"], "--seconds must be a finite number > 0, got inf"),
+    ("throughput", ["--seconds", "0"], "--seconds must be a finite number > 0, got 0.0"),
     ("throughput", ["--games", "Gopher", "--sizes", "8"],  # was measured as nothing, silently
      "--sizes sets the B of the Breakout 3.1 sweep, which this run does not measure"),
     ("throughput", ["--presets", "2.2", "--sizes", "8"], "--sizes sets the B of the Breakout"),
 ])
 def test_bad_arguments_are_usage_errors_naming_the_option(monkeypatch, capsys, tmp_path,
                                                           name, argv, message):
+    module = script(monkeypatch, name)
+
+    def measured(*args, **kwargs):  # an argument let through would start real emulators
+        raise AssertionError(f"{name} {argv} was measured instead of refused")
+
+    monkeypatch.setattr(module, "run" if name == "throughput" else "measure", measured)
     with pytest.raises(SystemExit) as exit_info:
-        script(monkeypatch, name).main(argv + ["--out", str(tmp_path)])
+        module.main(argv + ["--out", str(tmp_path)])
     assert exit_info.value.code == 2
     assert message in capsys.readouterr().err
     assert not any(tmp_path.iterdir())  # refused before measuring or writing anything

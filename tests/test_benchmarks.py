@@ -52,6 +52,19 @@ def table(text: str) -> list[dict]:
             for line in lines[2:]]
 
 
+def assert_made_with_this_software(recorded):
+    """A result file's ``software`` is provenance.software()'s: this Python, machine, code
+    commit (dirty or not: another process may be editing the checkout) and package versions."""
+    from stori_jax import provenance
+
+    now = provenance.software()
+    assert set(recorded) == {"python", "machine", "commit", "packages"}
+    assert {k: recorded[k] for k in ("python", "machine", "packages")} == {
+        k: now[k] for k in ("python", "machine", "packages")}
+    assert (recorded["commit"] or "").removesuffix("+dirty") == \
+        (now["commit"] or "").removesuffix("+dirty")
+
+
 # -- throughput.py: the formulas ----------------------------------------------------------------
 
 def test_a_timed_rate_counts_agent_steps_of_the_whole_batch_after_the_warm_up(monkeypatch):
@@ -89,12 +102,13 @@ def test_the_emulator_limit_splits_the_batch_over_the_workers_and_sums_each_wind
     def worker(rom_id, n, seconds, start, out):
         assert start.wait(5) and seconds == 6.0
         sizes.append(n)
-        out.put([10 * n, 30 * n, 20 * n])  # agent steps per window
+        out.put([10 * n, 60 * n, 20 * n])  # agent steps per window
 
     monkeypatch.setattr(throughput, "_limit_worker", worker)
     rate = throughput.emulator_limit("Breakout", batch=7, workers=3, seconds=6.0)
     assert sorted(sizes) == [2, 2, 3]
-    # windows of 2 s: 70, 210 and 140 steps summed over the workers; the median is 140
+    # windows of 2 s: 70, 420 and 140 steps summed over the workers; the median is 140 (the
+    # slow first window and the fast second do not pull it, as they would a mean of 210)
     assert rate == pytest.approx(140 / 2.0)
 
 
@@ -369,6 +383,7 @@ def test_a_run_writes_json_a_table_and_the_plots_it_names(monkeypatch, tmp_path,
         assert Path(f"{stem}{end}").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     data = json.loads(Path(f"{stem}.json").read_text())
     assert data["meta"]["seconds"] == 3.0 and data["meta"]["workers"] >= 1
+    assert_made_with_this_software(data["meta"]["software"])
     assert data["results"] == throughput.add_ratios(fake_results())
     text = Path(f"{stem}.md").read_text()
     assert text in capsys.readouterr().out
@@ -405,6 +420,78 @@ def test_the_batch_plot_is_drawn_only_for_a_sweep(monkeypatch, tmp_path):
     one_b = [r for r in throughput.add_ratios(fake_results()) if r["B"] == 32]
     paths = throughput.plots(one_b, tmp_path / "run", batch=32)
     assert [p.name for p in paths] == ["run-presets.png"]
+
+
+def test_a_run_measures_and_records_with_the_workers_and_seconds_asked(monkeypatch, tmp_path):
+    """--workers 7 --seconds 0.5 on a 2-core machine: every measurement gets them, and the
+    JSON's meta, each row's W and the table's header say so (not the cores, not 3 s)."""
+    throughput = script(monkeypatch, "throughput")
+    monkeypatch.setattr(throughput, "cores", lambda: 2)
+    monkeypatch.setattr(throughput, "plots", lambda results, stem, batch: [])
+    asked = []
+
+    def peer(rate):
+        return lambda game, batch, workers, seconds: asked.append((workers, seconds)) or rate
+
+    monkeypatch.setattr(throughput, "emulator_limit", peer(1000.0))
+    monkeypatch.setattr(throughput, "envpool_raw", peer(900.0))
+    monkeypatch.setattr(throughput, "ale_vector", peer(800.0))
+    monkeypatch.setattr(throughput, "stori", lambda game, preset, batch, seconds, obs, backend: (
+        asked.append((7, seconds)), (500.0, None))[1])
+    throughput.main(["--games", "Breakout", "--presets", "3.1", "--sizes", "8", "--skip-naive",
+                     "--workers", "7", "--seconds", "0.5", "--out", str(tmp_path)])
+    assert len(asked) >= 6 and set(asked) == {(7, 0.5)}
+    (json_file,) = tmp_path.glob("*.json")
+    data = json.loads(json_file.read_text())
+    assert data["meta"]["workers"] == 7 and data["meta"]["seconds"] == 0.5
+    assert data["meta"]["cores"] == 2
+    assert len(data["results"]) == len(asked) and all(r["W"] == 7 for r in data["results"])
+    assert all(r["steps_per_s"] is not None for r in data["results"])
+    (md,) = tmp_path.glob("*.md")
+    assert "W = 7 worker processes" in md.read_text()
+
+
+def test_a_run_records_each_measurement_and_goes_on_past_a_failed_one(monkeypatch):
+    throughput = script(monkeypatch, "throughput")
+
+    def broken():
+        raise RuntimeError("the emulator died")
+
+    def job(kind, fn, preset="2.2"):
+        return dict(kind=kind, game="Breakout", preset=preset, B=8, backend="subproc",
+                    obs="raw", fn=fn)
+
+    rows = throughput.run(throughput_args(workers=3), [
+        job("stori-jax", lambda: (500.0, 0.25)),
+        job("emulator limit", lambda: 1000.0, preset="-"),
+        job("stori-jax", broken),
+        job("stori-jax", lambda: (250.0, None), preset="3.1"),  # runs after the failure
+    ])
+    assert [r["steps_per_s"] for r in rows] == [500.0, 1000.0, None, 250.0]
+    assert rows[0]["concept2_share"] == 0.25 and rows[3]["concept2_share"] is None
+    assert "concept2_share" not in rows[1]
+    assert rows[2]["error"] == "RuntimeError: the emulator died"
+    assert not any("error" in r for r in rows[:2] + rows[3:])
+    assert all(r["W"] == 3 and "fn" not in r for r in rows)
+
+
+def test_the_presets_plot_draws_each_run_as_its_fraction_of_the_limit(monkeypatch, tmp_path):
+    import matplotlib.axes
+
+    throughput = script(monkeypatch, "throughput")
+    drawn, real_bar = {}, matplotlib.axes.Axes.bar
+
+    def bar(self, x, height, *args, label=None, **kwargs):
+        drawn[label] = [float(h) for h in height]
+        return real_bar(self, x, height, *args, label=label, **kwargs)
+
+    monkeypatch.setattr(matplotlib.axes.Axes, "bar", bar)
+    results = throughput.add_ratios(fake_results())
+    throughput.plots(results, tmp_path / "run", batch=32)
+    # bars per kind over the labels "Breakout 2.2", "Breakout 3.1" (0: no such run)
+    assert drawn == {"naive gymnasium gymnasium-async raw": [pytest.approx(0.2), 0.0],
+                     "stori-jax subproc atari84": [pytest.approx(0.3), 0.0],
+                     "stori-jax subproc raw": [pytest.approx(0.4), pytest.approx(0.5)]}
 
 
 # -- jax_stages.py, ppo_rollout.py, xla_rollout.py ----------------------------------------------
@@ -625,6 +712,44 @@ def test_the_naive_blackout_masks_each_screen_before_the_max_pool(monkeypatch):
     np.testing.assert_array_equal(frame[~hidden], expected[~hidden])
 
 
+def test_the_naive_episode_step_counts_agent_steps_into_concept_2(monkeypatch):
+    """Gopher 2.2 (cyclic, T = 600, a p = 1 blackout in concept 2): the first T steps of an
+    episode are concept 1 (no mask); step T + 1 is agent step T, concept 2's, masked."""
+    from stori_jax.functional.masks import region_mask
+
+    wrapper, env = naive_wrapper(monkeypatch, "Gopher", "2.2")
+    drift = stori_jax.preset("Gopher", "2.2").drift
+    mask = drift.secondary.observation
+    hidden, fill = region_mask(stori_jax.get_game("Gopher").blackout_modes[mask.mode].regions)
+    for _ in range(drift.period):
+        frame = wrapper.step(0)[0]
+    assert wrapper.episode_step == drift.period and wrapper.active == set()
+    assert not np.array_equal(frame[hidden], fill[hidden])
+    frame = wrapper.step(0)[0]
+    assert wrapper.episode_step == drift.period + 1
+    assert wrapper.active == {"ObservationMask"}
+    np.testing.assert_array_equal(frame[hidden], fill[hidden])
+    wrapper.reset()
+    assert wrapper.episode_step == 0 and wrapper.active == set()
+
+
+def test_each_naive_env_draws_from_its_own_seeded_stream(monkeypatch):
+    """Env i of seed s is seeded s * 100003 + i: the envs of a vector env do not all replay one
+    stream, and the same seed gives the same streams again."""
+    naive = script(monkeypatch, "naive_baseline")
+    monkeypatch.setattr(gym, "make", lambda *args, **kwargs: FakeAtari())
+    monkeypatch.setattr(gym.vector, "AsyncVectorEnv", lambda thunks, **kwargs: thunks)
+
+    def streams(seed):
+        thunks = naive.make_naive_vector_env("Breakout", stori_jax.preset("Breakout", "1"), 4,
+                                             seed=seed)
+        return [tuple(thunk().rng.random(4)) for thunk in thunks]
+
+    first = streams(3)
+    assert len(set(first)) == 4
+    assert streams(3) == first and set(streams(4)).isdisjoint(first)
+
+
 class FakeStoriEnv:
     """What the rollout benchmarks use of an env, without emulators."""
 
@@ -714,6 +839,99 @@ def test_the_training_rate_model_adds_rollout_and_update_time(monkeypatch):
     assert r == dict(env_only=1000.0, rollout_overlapped=800.0, update_per_s=4000.0,
                      rollout_sequential=400.0,
                      training_sps_model=pytest.approx(1 / (1 / 800 + 1 / 4000)))
+
+
+def test_the_ppo_stages_compile_before_timing_and_run_the_sequential_batch_on_both_halves_workers(
+        monkeypatch):
+    """Each timed loop runs once before its timing (its compile is not timed), and the no-overlap
+    rollout steps all num_envs on as many workers as the two halves have together (9 cores: 4 a
+    half), none inline."""
+    import os
+
+    import jax.numpy as jnp
+
+    ppo_rollout = script(monkeypatch, "ppo_rollout")
+    from baselines import ppo
+
+    config = ppo.PPOConfig(num_envs=8, num_steps=4)
+    calls, timed, made = Counter(), [], []
+
+    def median_rate(fn, steps, repeats):
+        timed.append(dict(calls))  # how often each loop ran before this timing
+        fn()
+        return 100.0
+
+    class Env(FakeStoriEnv):
+        def __init__(self, *args, **kwargs):
+            made.append((args, kwargs))
+            super().__init__(*args, **kwargs)
+
+    def count(name, result=None):
+        def fn(*args, **kwargs):
+            calls[name] += 1
+            return result(*args) if result else None
+        return fn
+
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: set(range(9)))
+    monkeypatch.setattr(ppo_rollout, "median_rate", median_rate)
+    monkeypatch.setattr(stori_jax, "make", Env)
+    monkeypatch.setattr(ppo, "env_only_sps", lambda config, steps: 1000.0)
+    monkeypatch.setattr(ppo, "make_envs", lambda config: [FakeStoriEnv(), FakeStoriEnv()])
+    monkeypatch.setattr(ppo, "make_network", lambda config, n: SimpleNamespace(
+        init=lambda key, obs: {}))
+    monkeypatch.setattr(ppo, "make_optimizer", lambda config: SimpleNamespace(
+        init=lambda params: {}))
+    monkeypatch.setattr(ppo, "make_update", lambda network, optimizer, config: count(
+        "update", lambda params, opt_state, rollout, obs, key: obs))
+    monkeypatch.setattr(ppo, "collect", count("overlapped", lambda envs, act_fn, params, obs,
+                                              key, n, episodes, step0: (jnp.zeros(1), obs, key)))
+    monkeypatch.setattr(ppo_rollout, "sequential_rollout", count("sequential"))
+    ppo_rollout.measure_stages(config, 3, SimpleNamespace(set_postfix_str=print,
+                                                          update=lambda: None))
+    assert timed == [dict(overlapped=1), dict(overlapped=2, update=1),
+                     dict(overlapped=2, update=2, sequential=1)]
+    (args, kwargs), = made
+    assert ppo.workers_per_half(config.num_envs // 2) == 4
+    assert args == (config.game, config.preset) and kwargs == dict(
+        num_envs=8, seed=0, obs="atari84", num_workers=8, inline_envs=0)
+
+
+def test_the_xla_loops_compile_before_timing(monkeypatch):
+    """The Python loop and the compiled scan each run once before their timing: the scan's
+    first call traces and compiles it (the env's step runs in Python only then)."""
+    import jax.numpy as jnp
+
+    xla_rollout = script(monkeypatch, "xla_rollout")
+    calls, timed = Counter(), []
+
+    def median_rate(fn, steps, repeats):
+        timed.append(dict(calls))
+        fn()
+        return 100.0
+
+    class Env(FakeStoriEnv):
+        def xla(self):
+            handle, step = super().xla()
+
+            def traced(handle, actions):
+                calls["compiled"] += 1
+                return step(handle, actions)
+            return handle, traced
+
+    def rollout(env, policy, params, key, steps, obs):
+        calls["python"] += 1
+        return SimpleNamespace(last_obs=obs)
+
+    monkeypatch.setattr(xla_rollout, "median_rate", median_rate)
+    monkeypatch.setattr(stori_jax, "make", Env)
+    monkeypatch.setattr(stori_jax, "rollout", rollout)
+    monkeypatch.setattr(xla_rollout.ppo, "make_network", lambda config, n: SimpleNamespace(
+        init=lambda key, obs: {}))
+    monkeypatch.setattr(xla_rollout.ppo, "act",
+                        lambda network, params, obs, key: (jnp.zeros(obs.shape[0], jnp.int32),))
+    xla_rollout.measure("Breakout", "3.1", num_envs=2, steps=5, repeats=3)
+    assert len(timed) == 2 and timed[0] == dict(python=1)
+    assert timed[1]["python"] == 2 and timed[1].get("compiled", 0) >= 1
 
 
 def test_the_peers_run_raw_frames_at_the_same_batch_threads_and_frame_skip(monkeypatch):
@@ -850,3 +1068,6 @@ def test_the_other_scripts_name_a_run_with_other_options_apart(monkeypatch, tmp_
                           "jax_stages": ""}[name] + suffix), stem
     day = datetime.date.today().isoformat()
     assert stem.startswith(f"{name.replace('_', '-')}-{day}")
+    data = json.loads((tmp_path / f"{stem}.json").read_text())
+    assert_made_with_this_software(data["meta"]["software"] if name == "jax_stages"
+                                   else data["software"])

@@ -212,3 +212,28 @@ def test_a_preset_without_a_random_draw_plays_the_same_from_every_seed(game, nam
     same = all(np.array_equal(runs[0].stacked(k), runs[1].stacked(k))
                for k in ("obs", "reward", "obs_masked"))
     assert same == deterministic
+
+
+def test_each_draw_of_a_step_comes_from_its_own_purpose_stream(monkeypatch):
+    """core.before_step with every draw on (action noise, an event, a mask, drift, no-op
+    starts) takes each Purpose's keys exactly once: no two kinds of draw share a stream (the
+    no-op counts drawn from the action-noise keys would be correlated with the corruptions)."""
+    import jax
+    import jax.numpy as jnp
+
+    from stori_jax import ConceptDrift, functional as F
+    from stori_jax.core import before_step, initial_state
+    from stori_jax.plan import compile_plan
+
+    config = Config(action_noise=ActionNoise(0.3), event=RandomEvent(3, 0.05),
+                    drift=ConceptDrift("gradual", 2, Config(
+                        observation=ObservationMask("crop", 5, 0.5))))
+    plan = compile_plan(config, get_game("BankHeist"), num_envs=2, frame_skip=4, obs="raw",
+                        noop_max=5)
+    assert plan.noise and plan.event and plan.mask and plan.drift_schedule and plan.noop_max
+    used, real = [], F.purpose_keys
+    monkeypatch.setattr(F, "purpose_keys", lambda keys, purpose: (
+        used.append(F.Purpose(purpose)), real(keys, purpose))[1])
+    with jax.disable_jit():  # run the body (no cached trace): every call is seen
+        before_step(plan, initial_state(plan, 0), jnp.zeros((2,), jnp.int32))
+    assert sorted(used) == sorted(F.Purpose), used

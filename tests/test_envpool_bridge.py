@@ -261,7 +261,19 @@ def test_consecutive_seeds_share_no_emulator_stream():
 
     a, b = reset_rams(0), reset_rams(1)
     assert not any(np.array_equal(a[i + 1], b[i]) for i in range(3))
+    assert not np.array_equal(a, b)  # nor are both seeds' envs one run (a base ignoring seed)
     np.testing.assert_array_equal(reset_rams(0), a)  # still the same run for the same seed
+
+
+def test_every_seed_has_its_own_envpool_base():
+    """envpool_seed hashes the whole seed: 1000 seeds give 1000 bases, each in envpool's range
+    and the same on every call (a base from part of the seed, or none of it, repeats)."""
+    from envpool_bridge import MAX_BASE_SEED, envpool_seed
+
+    bases = [envpool_seed(s) for s in range(1000)]
+    assert len(set(bases)) == 1000
+    assert all(0 <= b <= MAX_BASE_SEED for b in bases)
+    assert envpool_seed(999) == bases[999]
 
 
 def test_envpool_rewards_are_the_games_own_score_unclipped():

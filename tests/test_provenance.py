@@ -78,3 +78,34 @@ def test_a_package_outside_its_own_checkout_has_no_commit(tmp_path, monkeypatch)
     if shutil.which("git") is not None:
         subprocess.run(["git", "-C", str(other), "init", "-q"], check=True)
     assert provenance.code_commit() is None
+
+
+def test_the_packages_that_make_a_run_reproduce_are_all_recorded():
+    """The module's own promise: JAX (jax and its jaxlib) and ale-py, beside numpy and the
+    package itself, each at the version installed."""
+    import ale_py
+    import jaxlib
+    import numpy
+
+    packages = provenance.package_versions()
+    assert {"stori-jax", "jax", "jaxlib", "ale-py", "numpy"} <= set(packages)
+    assert packages["ale-py"] == ale_py.__version__
+    assert packages["jaxlib"] == jaxlib.__version__
+    assert packages["numpy"] == numpy.__version__
+
+
+def test_a_package_that_is_not_installed_is_recorded_as_none(monkeypatch):
+    import importlib.metadata
+
+    real = importlib.metadata.version
+
+    def version(name):
+        if name == "envpool":
+            raise importlib.metadata.PackageNotFoundError(name)
+        return real(name)
+
+    monkeypatch.setattr(importlib.metadata, "version", version)
+    packages = provenance.package_versions()
+    assert packages["envpool"] is None
+    assert packages["jax"] == jax.__version__
+    assert all(packages[name] for name in ("stori-jax", "jaxlib", "ale-py", "numpy"))
