@@ -810,6 +810,16 @@ def test_the_xla_ratio_is_the_compiled_rate_over_the_python_loops(monkeypatch):
     assert seen == [10, 10]  # agent steps summed over the batch
 
 
+def stub_ppo_setup(monkeypatch, ppo):
+    """ppo's env-only rate, envs, network and optimizer as measure_stages makes them: stubs."""
+    monkeypatch.setattr(ppo, "env_only_sps", lambda config, steps: 1000.0)
+    monkeypatch.setattr(ppo, "make_envs", lambda config: [FakeStoriEnv(), FakeStoriEnv()])
+    monkeypatch.setattr(ppo, "make_network", lambda config, n: SimpleNamespace(
+        init=lambda key, obs: {}))
+    monkeypatch.setattr(ppo, "make_optimizer", lambda config: SimpleNamespace(
+        init=lambda params: {}))
+
+
 def test_the_training_rate_model_adds_rollout_and_update_time(monkeypatch):
     import jax.numpy as jnp
 
@@ -821,14 +831,9 @@ def test_the_training_rate_model_adds_rollout_and_update_time(monkeypatch):
     median_rate, seen = rates_in_order(800.0, 4000.0, 400.0)
     monkeypatch.setattr(ppo_rollout, "median_rate", median_rate)
     monkeypatch.setattr(stori_jax, "make", FakeStoriEnv)
-    monkeypatch.setattr(ppo, "env_only_sps", lambda config, steps: 1000.0)
-    monkeypatch.setattr(ppo, "make_envs", lambda config: [FakeStoriEnv(), FakeStoriEnv()])
-    monkeypatch.setattr(ppo, "make_network", lambda config, n: SimpleNamespace(
-        init=lambda key, obs: {}))
+    stub_ppo_setup(monkeypatch, ppo)
     monkeypatch.setattr(ppo, "act", lambda network, params, obs, key: (
         jnp.zeros(obs.shape[0], jnp.int32), None, None))
-    monkeypatch.setattr(ppo, "make_optimizer", lambda config: SimpleNamespace(
-        init=lambda params: {}))
     monkeypatch.setattr(ppo, "make_update", lambda network, optimizer, config:
                         lambda params, opt_state, rollout, obs, key: obs)
     monkeypatch.setattr(ppo, "collect", lambda envs, act_fn, params, obs, key, n, episodes,
@@ -875,12 +880,7 @@ def test_the_ppo_stages_compile_before_timing_and_run_the_sequential_batch_on_bo
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: set(range(9)))
     monkeypatch.setattr(ppo_rollout, "median_rate", median_rate)
     monkeypatch.setattr(stori_jax, "make", Env)
-    monkeypatch.setattr(ppo, "env_only_sps", lambda config, steps: 1000.0)
-    monkeypatch.setattr(ppo, "make_envs", lambda config: [FakeStoriEnv(), FakeStoriEnv()])
-    monkeypatch.setattr(ppo, "make_network", lambda config, n: SimpleNamespace(
-        init=lambda key, obs: {}))
-    monkeypatch.setattr(ppo, "make_optimizer", lambda config: SimpleNamespace(
-        init=lambda params: {}))
+    stub_ppo_setup(monkeypatch, ppo)
     monkeypatch.setattr(ppo, "make_update", lambda network, optimizer, config: count(
         "update", lambda params, opt_state, rollout, obs, key: obs))
     monkeypatch.setattr(ppo, "collect", count("overlapped", lambda envs, act_fn, params, obs,

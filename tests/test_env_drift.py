@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stori_jax import ActionNoise, Config, ConceptDrift, ObservationMask, RandomEvent
+from stori_jax import ActionNoise, Config, ConceptDrift, ObservationMask, RandomEvent, get_game
 
 from _env_support import (NOOP, breakout_tracker, last_ram, lockstep_with_twin, make,
                           random_actions, run_env, run_lockstep)
@@ -26,25 +26,35 @@ def drift(schedule, period, secondary, **kw):
     return Config(drift=ConceptDrift(schedule, period, secondary), **kw)
 
 
-def test_sudden_drift_to_blackout_switches_at_step_T_and_restarts_each_episode():
-    """T = 5, episodes of 10 steps (max_episode_frames 40, frame_skip 4): steps 0..4 of each
-    episode show the twin's screen, steps 5..9 the blackout; the observation returned at the
-    episode end is the next episode's first (unmasked) one."""
-    steps, T = 25, 5
-    config = drift("sudden", T, Config(observation=ObservationMask("blackout", 1, 1.0)))
-    actions = random_actions(4, steps, 2, seed=21)
-    ev, twin = lockstep_with_twin("Breakout", config, steps, lambda k, runs: actions[k],
-                                  obs="raw", max_episode_frames=40)
+def sudden_drift_in_episodes_of_10(game, secondary, *, steps, T, seed):
+    """2 envs under sudden drift at ``T`` to ``secondary``, in episodes of 10 steps
+    (max_episode_frames 40, frame_skip 4), beside a 3.1 twin on the same random actions: the
+    game is the twin's, concept 2 holds on episode steps T..9, each episode is truncated at
+    step 9, and concept 2 masks the observation, except the one returned with a truncation
+    (the next episode's first).  (run, twin run, masked, truncated)."""
+    config = drift("sudden", T, secondary)
+    actions = random_actions(get_game(game).num_actions, steps, 2, seed=seed)
+    ev, twin = lockstep_with_twin(game, config, steps, lambda k, runs: actions[k], obs="raw",
+                                  max_episode_frames=40)
     np.testing.assert_array_equal(ev.ram, twin.ram)
     episode_step = np.arange(steps) % 10
     concept = ev.stacked("concept")
     np.testing.assert_array_equal(concept, np.repeat((episode_step >= T)[:, None], 2, 1))
     truncated = ev.stacked("truncated")
-    np.testing.assert_array_equal(truncated[:, 0], episode_step == 9)
-    # concept 2 masks the observation, except the first observation of the next episode
+    np.testing.assert_array_equal(truncated, np.repeat((episode_step == 9)[:, None], 2, 1))
     masked = ev.stacked("obs_masked")
     np.testing.assert_array_equal(masked, (concept == 1) & ~truncated)
     assert not ev.reset_info["obs_masked"].any()
+    return ev, twin, masked, truncated
+
+
+def test_sudden_drift_to_blackout_switches_at_step_T_and_restarts_each_episode():
+    """T = 5, episodes of 10 steps (max_episode_frames 40, frame_skip 4): steps 0..4 of each
+    episode show the twin's screen, steps 5..9 the blackout; the observation returned at the
+    episode end is the next episode's first (unmasked) one."""
+    ev, twin, masked, truncated = sudden_drift_in_episodes_of_10(
+        "Breakout", Config(observation=ObservationMask("blackout", 1, 1.0)), steps=25, T=5,
+        seed=21)
     obs, twin_obs = ev.stacked("obs"), twin.stacked("obs")
     hidden = breakout_blackout_hidden()
     np.testing.assert_array_equal(obs[~masked], twin_obs[~masked])
@@ -82,20 +92,8 @@ def test_sudden_drift_to_a_ram_obs_mode_leaves_each_episodes_first_observation_t
     one but the last is rendered; the observation returned with a truncation is the next
     episode's first, seen under concept 1: the true screen, the twin's and the first reset's,
     not rendered (obs_masked False) though the ending step was under concept 2."""
-    steps, T = 22, 3
-    config = drift("sudden", T, Config(observation=ObservationMask("ram", 2, 1.0)))
-    actions = random_actions(18, steps, 2, seed=23)
-    ev, twin = lockstep_with_twin("Boxing", config, steps, lambda k, runs: actions[k],
-                                  obs="raw", max_episode_frames=40)
-    np.testing.assert_array_equal(ev.ram, twin.ram)
-    episode_step = np.arange(steps) % 10
-    concept = ev.stacked("concept")
-    np.testing.assert_array_equal(concept, np.repeat((episode_step >= T)[:, None], 2, 1))
-    truncated = ev.stacked("truncated")
-    np.testing.assert_array_equal(truncated, np.repeat((episode_step == 9)[:, None], 2, 1))
-    masked = ev.stacked("obs_masked")
-    np.testing.assert_array_equal(masked, (concept == 1) & ~truncated)
-    assert not ev.reset_info["obs_masked"].any()
+    ev, twin, masked, truncated = sudden_drift_in_episodes_of_10(
+        "Boxing", Config(observation=ObservationMask("ram", 2, 1.0)), steps=22, T=3, seed=23)
     obs, twin_obs = ev.stacked("obs"), twin.stacked("obs")
     np.testing.assert_array_equal(obs[~masked], twin_obs[~masked])
     assert (obs[masked] != twin_obs[masked]).any(axis=(1, 2, 3)).all()
