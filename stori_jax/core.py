@@ -211,9 +211,9 @@ def after_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, ne
     # an env reset instead of stepped played no-ops (NOOP), not this step's drawn actions, and
     # its first observation is seen under concept 1
     stepped = ~jnp.asarray(reset_step, bool)
-    # a slot is played unless the env was reset instead, or (at frame granularity) its
-    # episode ended on an earlier frame of the step: ALE plays no frame past an episode's end
-    played = (jnp.arange(plan.num_slots)[None, :] < out.frames_played[:, None]) & stepped[:, None]
+    # the slots ALE played: none where the env was reset instead (frames_played 0), and (at
+    # frame granularity) none after the frame its episode ended on
+    played = jnp.arange(plan.num_slots)[None, :] < out.frames_played[:, None]
     info = {
         "executed_action": slots_out(jnp.where(played, draws.executed_slots, 0)),
         "action_corrupted": slots_out(draws.corrupted & played),
