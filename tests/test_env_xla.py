@@ -326,3 +326,22 @@ def test_after_an_error_in_an_xla_step_no_handle_is_current_until_reset():
         np.testing.assert_array_equal(np.asarray(env.reset()[0]), np.asarray(twin.reset()[0]))
         actions = random_actions(4, 3, 2, seed=9)
         assert_same(python_steps(env, actions), python_steps(twin, actions))
+
+
+def test_close_right_after_dispatching_a_scan_lets_its_queued_steps_finish():
+    """A jitted scan returns before its emulator callbacks have run wherever JAX dispatches
+    asynchronously (an accelerator; XLA's CPU client too, for long enough programs): close()
+    waits for the steps still queued, so every one of them completes, as the same steps from
+    Python do, instead of meeting closed workers."""
+    actions = random_actions(4, 60, 2, seed=8)
+    with make("Breakout", preset="1") as env:
+        env.reset()
+        expected = python_steps(env, actions)
+    env = make("Breakout", preset="1")
+    env.reset()
+    handle, step = env.xla()
+    handle, got = scan(step, handle, actions)  # dispatched, not waited for
+    env.close()
+    assert env.closed
+    assert int(handle.steps) == len(actions)
+    assert_same(to_numpy(got), expected)
