@@ -158,19 +158,25 @@ class WorkerOutputs(NamedTuple):
     event_fired: object   # (B,) int32
     episode_return: object
     episode_length: object
+    # an autoresetting env's step where an episode ended (None where none did: the same step
+    # compiled without them): what frames, single_frame and ram held before the autoreset
+    final_frames: object = None
+    final_single_frame: object = None
+    final_ram: object = None
 
 
-@functools.partial(jax.jit, static_argnames=("plan",))
-def after_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, new_episode,
-               reset_step):
-    """(new state, obs, reward, terminated, truncated, info) from the workers' outputs, in one
-    compiled call (every output is a fresh array: the workers' buffers may be reused).
+# the outputs every backend hands over on every step
+STEP_OUTPUTS = tuple(name for name in WorkerOutputs._fields if not name.startswith("final_"))
+FINAL_OUTPUTS = tuple(name for name in WorkerOutputs._fields if name.startswith("final_"))
+FRAME_OUTPUTS = ("frames", "final_frames")  # screens: none where the observation is the RAM
 
-    ``new_episode`` (B,) bool marks envs whose observation is the first of an episode;
-    ``reset_step`` those that were reset instead of stepped (next-step autoreset)."""
-    game = get_game(plan.game)
+
+def observe(plan: Plan, game, draws: Draws, frames, ram, ram_rendered, single_frame,
+            new_episode):
+    """(observation, masked) of one set of the workers' screens (or RAM): the step's mask
+    decisions applied (gated by the concept, or, for the first frame of an episode, by whether
+    the mask shows on resets), then preprocessed (atari84: one frame, not yet stacked)."""
     masked = jnp.zeros((plan.num_envs,), bool)
-    frames = out.frames
     if plan.mask is not None and plan.mask.kind != "ram" and plan.obs != "ram":
         m = plan.mask
         reset_on = not m.under_drift
@@ -181,7 +187,7 @@ def after_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, ne
         masked_slots = []
         # one emulator frame in both slots of a pair (the first obs of an episode, frame_skip
         # 1, an early end) gets one decision (and one torch centre), slot 1's, like any frame
-        single = new_episode | (out.single_frame != 0)
+        single = new_episode | (single_frame != 0)
         for j, screen in enumerate(slots):
             k = jnp.where(single & pair, 1, j)  # a pooled screen: slot 0's, always
             apply = jnp.take_along_axis(draws.mask_apply, k[:, None], 1) & gate[:, None]
@@ -196,7 +202,7 @@ def after_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, ne
         screen = (jnp.maximum(masked_slots[0], masked_slots[1]) if pair else masked_slots[0])
     else:
         if plan.mask is not None and plan.mask.kind == "ram":
-            masked = out.ram_rendered != 0
+            masked = ram_rendered != 0
         screen = F.pool_screens(frames, plan.frames_layout) if plan.obs != "ram" else None
 
     if plan.obs == "raw":
@@ -206,7 +212,40 @@ def after_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, ne
     elif plan.obs == "dreamer64":
         obs = F.dreamer64(screen)
     else:
-        obs = out.ram + jnp.uint8(0)
+        obs = ram + jnp.uint8(0)
+    return obs, masked
+
+
+def final_observations(plan: Plan, game, draws: Draws, out: WorkerOutputs, obs):
+    """info["final_obs"] of an autoresetting env (atari84: its newest frame, stacked by
+    :func:`push_frames`): where the step ended an episode, the observation it ended on (a
+    stepped frame, not an episode's first), as the env with ``autoreset=False`` returns it;
+    elsewhere a copy of ``obs`` (its own buffer, as every output is).  Without the final_*
+    outputs (no episode ended this step): the copy alone."""
+    if out.final_frames is None:
+        return obs + jnp.uint8(0)
+    final, _ = observe(plan, game, draws, out.final_frames, out.final_ram, out.ram_rendered,
+                       out.final_single_frame, jnp.zeros((plan.num_envs,), bool))
+    return jnp.where(ended(out, obs.ndim), final, obs)
+
+
+def ended(out: WorkerOutputs, ndim: int = 1):
+    """(B,) bool where the step ended an episode, with ``ndim - 1`` axes to broadcast."""
+    done = (out.terminated != 0) | (out.truncated != 0)
+    return jnp.reshape(done, done.shape + (1,) * (ndim - 1))
+
+
+@functools.partial(jax.jit, static_argnames=("plan",))
+def after_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, new_episode,
+               reset_step):
+    """(new state, obs, reward, terminated, truncated, info) from the workers' outputs, in one
+    compiled call (every output is a fresh array: the workers' buffers may be reused).
+
+    ``new_episode`` (B,) bool marks envs whose observation is the first of an episode;
+    ``reset_step`` those that were reset instead of stepped (next-step autoreset)."""
+    game = get_game(plan.game)
+    obs, masked = observe(plan, game, draws, out.frames, out.ram, out.ram_rendered,
+                          out.single_frame, new_episode)
     slots_out = (lambda x: x) if plan.per_frame else (lambda x: x[:, 0])
     # an env reset instead of stepped played no-ops (NOOP), not this step's drawn actions, and
     # its first observation is seen under concept 1
@@ -228,6 +267,8 @@ def after_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, ne
         "reset_step": reset_step,
         "frames_played": out.frames_played + 0,
     }
+    if plan.autoreset:
+        info["final_obs"] = final_observations(plan, game, draws, out, obs)
     episode_step = jnp.where(new_episode, 0, state.episode_step + 1)
     # a new episode starts from NOOP (action 0), as after env.reset(): sticky actions never
     # repeat the last action of the episode before
@@ -248,17 +289,26 @@ def finish_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, r
     if plan.obs == "atari84":
         if isinstance(obs, jax.core.Tracer):  # traced with its caller: keep the two apart
             obs = jax.lax.optimization_barrier(obs)
-        stack, obs = push_frames(state.stack, obs, new_episode)
+        final = info.pop("final_obs", None)
+        stack, obs, final = push_frames(state.stack, obs, new_episode, final, done)
         state = state._replace(stack=stack)
+        if plan.autoreset:
+            info["final_obs"] = final
     pending = done if not plan.autoreset else done & False
     return state, (obs, reward, terminated, truncated, info), pending
 
 
 @jax.jit
-def push_frames(stack, frame, new_episode):
+def push_frames(stack, frame, new_episode, final_frame=None, done=None):
     """The atari84 frame stack.  Compiled on its own: fused with the resize above, XLA would
     recompute the resize for each of the 4 stack slots of a new episode (measured 4x slower).
-    (the env's stack, the observation): two buffers, so that a caller who donates the
-    observation to a jit of its own leaves the env's state intact."""
-    stack = F.push_frame(stack, frame, new_episode)
-    return stack, stack
+    (the env's stack, the observation, the final observation): two buffers for the first two,
+    so that a caller who donates the observation to a jit of its own leaves the env's state
+    intact.  The final observation (None without ``final_frame``, the newest frame of
+    :func:`final_observations`): where ``done``, ``final_frame`` pushed onto the stack the
+    episode ended with, elsewhere a third copy of the observation."""
+    new_stack = F.push_frame(stack, frame, new_episode)
+    if final_frame is None:
+        return new_stack, new_stack, None
+    final = F.push_frame(stack, final_frame, jnp.zeros(new_episode.shape, bool))
+    return new_stack, new_stack, jnp.where(done[:, None, None, None], final, new_stack)

@@ -22,8 +22,8 @@ from stori_jax.backends.worker import emulator_seed
 from stori_jax.checks import (MAX_INT32, MAX_SEED, check_actions, check_int, check_real,
                               shown)
 from stori_jax.config import Config, GRANULARITIES
-from stori_jax.core import (Draws, EnvState, WorkerOutputs, before_step, finish_step,
-                            initial_state)
+from stori_jax.core import (FINAL_OUTPUTS, FRAME_OUTPUTS, STEP_OUTPUTS, Draws, EnvState,
+                            WorkerOutputs, before_step, finish_step, initial_state)
 from stori_jax.fork_guard import refuse_if_forked_after_jax
 from stori_jax.functional.preprocess import ATARI84, DREAMER64, STACK
 from stori_jax.games import get_game
@@ -584,9 +584,10 @@ class Env:
             self._write_inputs(draws, reset_first=reset_first)
             self.backend.send_step()
             out = self.backend.recv()
+            names = STEP_OUTPUTS + (FINAL_OUTPUTS if self.plan.autoreset else ())
             result = WorkerOutputs(**{
-                name: np.array(out[name]) if name != "frames" or self.plan.obs != "ram"
-                else np.zeros((0,), np.uint8) for name in WorkerOutputs._fields})
+                name: np.array(out[name]) if name not in FRAME_OUTPUTS or self.plan.obs != "ram"
+                else np.zeros((0,), np.uint8) for name in names})
         except BaseException:
             # the emulators may be ahead of the JAX side: only reset() continues
             self._xla_driven, self._needs_reset = False, True
@@ -704,7 +705,10 @@ class Env:
     def _finish(self, state, draws, out, reset_first):
         """((obs, reward, terminated, truncated, info), envs due for a reset) of the workers'
         outputs ``out``; the env's state moves on."""
-        outputs = WorkerOutputs(**{name: out[name] for name in WorkerOutputs._fields})
+        names = STEP_OUTPUTS
+        if self.plan.autoreset and (out["terminated"].any() or out["truncated"].any()):
+            names += FINAL_OUTPUTS  # the ended episodes' last observations
+        outputs = WorkerOutputs(**{name: out[name] for name in names})
         state, result, pending = finish_step(self._jit_plan, state, draws, outputs, reset_first)
         # the workers overwrite their buffers on the next send: finish reading them now
         jax.block_until_ready(result)

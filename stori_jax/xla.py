@@ -26,7 +26,8 @@ from jax.experimental import io_callback
 
 from stori_jax.backends.layout import SCREEN, buffer_specs
 from stori_jax.checks import check_actions
-from stori_jax.core import EnvState, WorkerOutputs, before_step, finish_step, initial_state
+from stori_jax.core import (FRAME_OUTPUTS, EnvState, WorkerOutputs, before_step, finish_step,
+                            initial_state)
 from stori_jax.functional.preprocess import frames_shape
 
 
@@ -48,13 +49,17 @@ def new_epoch() -> int:
 
 
 def output_shapes(plan) -> WorkerOutputs:
-    """What one step's callback returns; no screens where the observation is the RAM."""
+    """What one step's callback returns; no screens where the observation is the RAM.  An
+    autoresetting env's always holds the final_* outputs (a compiled step has one shape)."""
     b = plan.num_envs
-    shapes = buffer_specs(b, plan.frame_skip)  # the workers' output buffers
+    # the workers' output buffers
+    shapes = buffer_specs(b, plan.frame_skip, final=plan.autoreset)
     frames = frames_shape(plan.frames_layout, b, SCREEN) if plan.obs != "ram" else (0,)
-    shapes["frames"] = (frames, np.uint8)  # as the backend hands them over
+    for name in FRAME_OUTPUTS:
+        if name in shapes:
+            shapes[name] = (frames, np.uint8)  # as the backend hands them over
     return WorkerOutputs(**{name: jax.ShapeDtypeStruct(*shapes[name])
-                            for name in WorkerOutputs._fields})
+                            for name in WorkerOutputs._fields if name in shapes})
 
 
 def initial_handle(state: EnvState, reset_pending, epoch: int) -> XlaHandle:

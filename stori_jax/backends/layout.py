@@ -19,12 +19,15 @@ STEP_RENDER_BITS = (1, 2)
 RESET_RENDER_BITS = (4, 8)
 
 
-def buffer_specs(num_envs: int, frame_skip: int,
-                 screens: bool = True) -> dict[str, tuple[tuple[int, ...], type]]:
+def buffer_specs(num_envs: int, frame_skip: int, screens: bool = True,
+                 final: bool = False) -> dict[str, tuple[tuple[int, ...], type]]:
     """Name -> (shape, dtype) of every buffer; without ``screens`` (a RAM observation) the
-    frame buffer holds no pixels."""
+    frame buffers hold no pixels.  ``final`` (an autoresetting batch): also the buffers of an
+    ended episode's last observation, written where a step's episode ended (the others hold
+    the next episode's first)."""
     b = num_envs
-    return {
+    frames = ((2, b) + (SCREEN if screens else (0, 0, SCREEN[2])), np.uint8)
+    specs = {
         # parent -> workers
         "executed": ((b, frame_skip), np.int32),      # minimal-set action index per frame
         "event_u": ((b, frame_skip, 2), np.float32),   # per frame: firing draw, choice draw
@@ -33,8 +36,7 @@ def buffer_specs(num_envs: int, frame_skip: int,
         "noops": ((b,), np.int32),                     # no-op frames after a reset
         "reset_first": ((b,), np.uint8),               # reset this env instead of stepping it
         # workers -> parent
-        "frames": ((2, b) + (SCREEN if screens else (0, 0, SCREEN[2])), np.uint8),
-        #                                                the last two screens, slot-major
+        "frames": frames,                              # the last two screens, slot-major
         #                                                (one frame in both: see single_frame)
         "ram": ((b, RAM_SIZE), np.uint8),
         "reward": ((b,), np.float32),
@@ -50,12 +52,17 @@ def buffer_specs(num_envs: int, frame_skip: int,
         "episode_return": ((b,), np.float32),          # final value where an episode ended
         "episode_length": ((b,), np.int32),
     }
+    if final:  # what frames, single_frame and ram held before the autoreset replaced them
+        specs.update(final_frames=frames, final_single_frame=((b,), np.uint8),
+                     final_ram=((b, RAM_SIZE), np.uint8))
+    return specs
 
 
-def shared_bytes(num_envs: int, frame_skip: int, screens: bool = True) -> int:
+def shared_bytes(num_envs: int, frame_skip: int, screens: bool = True,
+                 final: bool = False) -> int:
     """The bytes :func:`buffer_specs` asks for (computed, nothing allocated)."""
     return sum(int(np.prod(shape, dtype=object)) * np.dtype(dtype).itemsize
-               for shape, dtype in buffer_specs(num_envs, frame_skip, screens).values())
+               for shape, dtype in buffer_specs(num_envs, frame_skip, screens, final).values())
 
 
 @dataclass
@@ -65,10 +72,10 @@ class SharedBuffers:
     raw: dict
 
     @classmethod
-    def allocate(cls, ctx, num_envs: int, frame_skip: int,
-                 screens: bool = True) -> "SharedBuffers":
+    def allocate(cls, ctx, num_envs: int, frame_skip: int, screens: bool = True,
+                 final: bool = False) -> "SharedBuffers":
         raw = {}
-        for name, (shape, dtype) in buffer_specs(num_envs, frame_skip, screens).items():
+        for name, (shape, dtype) in buffer_specs(num_envs, frame_skip, screens, final).items():
             nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
             raw[name] = (ctx.RawArray(ctypes.c_uint8, nbytes), shape, np.dtype(dtype).str)
         return cls(raw)

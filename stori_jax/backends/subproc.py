@@ -178,7 +178,8 @@ class SubprocBackend:
         self.frames_layout = "pooled" if pool_screens else "pair"
         self.max_episode_frames = max_episode_frames
         ctx = mp.get_context("spawn")
-        self.buffers = SharedBuffers.allocate(ctx, num_envs, frame_skip, want_screens)
+        self.buffers = SharedBuffers.allocate(ctx, num_envs, frame_skip, want_screens,
+                                              final=autoreset)
         self.views = self.buffers.views()
         if num_workers and not 0 <= inline_envs < num_envs:
             raise ValueError(f"inline_envs must be in [0, num_envs - 1], got {inline_envs}")
@@ -354,8 +355,9 @@ class SubprocBackend:
             raise InterruptedStepError(
                 f"a step was interrupted while env {env} was being emulated in this process; "
                 "its emulator is half a step ahead: call reset() before stepping again")
-        if self.frames_layout == "pooled":
-            return dict(self.views, frames=self.views["frames"][0])  # contiguous (B, H, W, 3)
+        if self.frames_layout == "pooled":  # contiguous (B, H, W, 3)
+            return dict(self.views, **{name: self.views[name][0] for name in
+                                       ("frames", "final_frames") if name in self.views})
         return self.views
 
     def snapshot(self) -> list[dict]:

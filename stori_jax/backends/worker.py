@@ -199,7 +199,6 @@ class Emulator:
         total = interval = 0.0
         fired = rendered = 0
         terminated = truncated = False
-        keep_end = not spec.autoreset  # an episode's end is observed (not replaced by a reset)
         for f in range(skip):
             draw = f if per_frame else 0
             if active and rule.pre_frame is not None:
@@ -232,7 +231,7 @@ class Emulator:
                     self.prev_ram[:] = self.ram
                 total += interval
                 interval = 0.0
-            ends_early = done and keep_end and f < skip - 1
+            ends_early = done and f < skip - 1  # observed (after an autoreset: as final_*)
             if spec.want_screens and (f >= skip - 2 or ends_early):
                 # slot 1: the step's last frame (the episode's last, where it ends early)
                 slot = 1 if f == skip - 1 or ends_early else 0
@@ -258,7 +257,13 @@ class Emulator:
         v["episode_return"][i] = self.episode_return if done else 0.0
         v["episode_length"][i] = self.episode_length if done else 0
         if done and spec.autoreset:
-            self.reset()  # autoreset: the observation is the next episode's first one
+            # the ended episode's last observation, then the next episode's first one
+            if spec.want_screens:
+                self.pool()
+                v["final_frames"][:, i] = self.frames
+            v["final_single_frame"][i] = single
+            ale.getRAM(v["final_ram"][i])
+            self.reset()
         else:
             if spec.want_screens:
                 self.pool()
