@@ -305,7 +305,9 @@ class Rollout(NamedTuple):
     action: jax.Array
     logp: jax.Array
     value: jax.Array
-    reward: jax.Array      # clipped to its sign, as usual on Atari
+    reward: jax.Array      # clipped to its sign, as usual on Atari; where the frame cap cut the
+    #                        episode off (truncated, not terminated), plus gamma x the value of
+    #                        the observation it ended on (info["final_obs"])
     done: jax.Array        # the episode ended after this step (terminated or truncated)
 
 
@@ -334,12 +336,23 @@ def workers_per_half(half: int) -> int:
     return max(1, min(half, ((cores or 2) - 1) // 2))
 
 
-def collect(envs, act_fn, params, obs, key, num_steps: int, episodes: list, step0: int):
+def collect(envs, act_fn, params, obs, key, num_steps: int, episodes: list, step0: int,
+            value_fn=None, gamma: float = 0.0):
     """Step both halves ``num_steps`` times under the policy: each half's actions are chosen
     while the other half emulates.  Returns (Rollout, last obs per half, key); finished
-    episodes are appended to ``episodes`` as (global_step, env, return, length)."""
+    episodes are appended to ``episodes`` as (global_step, env, return, length).  With
+    ``value_fn(params, obs) -> (B,) values``, an episode cut off at the frame cap is
+    bootstrapped: its last reward gets ``gamma`` x the value of the observation it ended on
+    (the step's ``done`` still stops GAE there, so the value stands in for what follows)."""
     half = envs[0].num_envs
     records = ([], [])
+
+    def cut_off_value(truncated, terminated, info):
+        """gamma V(final obs) where the cap cut an episode off, else 0; None where none was."""
+        cut = np.asarray(truncated) & ~np.asarray(terminated)
+        if value_fn is None or not cut.any():
+            return None
+        return jnp.where(cut, gamma * value_fn(params, info["final_obs"]), 0.0)
 
     def choose(g):
         nonlocal key
@@ -351,7 +364,11 @@ def collect(envs, act_fn, params, obs, key, num_steps: int, episodes: list, step
     def finish(g, actions, t):
         next_obs, reward, terminated, truncated, info = envs[g].recv()
         done = terminated | truncated
-        records[g].append((obs[g], *actions, jnp.sign(reward), done))
+        reward = jnp.sign(reward)
+        bootstrap = cut_off_value(truncated, terminated, info)
+        if bootstrap is not None:  # (no change to a rollout the cap never cuts)
+            reward = reward + bootstrap
+        records[g].append((obs[g], *actions, reward, done))
         obs[g] = next_obs
         finished = np.flatnonzero(np.asarray(done))
         if finished.size:
@@ -640,6 +657,7 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
         network = make_network(config, envs[0].num_actions)
         optimizer = make_optimizer(config)
         act_fn = jax.jit(lambda p, o, k: act(network, p, o, k))
+        value_fn = jax.jit(lambda p, o: network.apply(p, o)[1])
         update = make_update(network, optimizer, config)
         if ckpt is not None:
             params, opt_state = ckpt["params"], ckpt["opt_state"]
@@ -671,7 +689,7 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
             step0 = iteration * config.batch_size
             episodes = []
             rollout, obs, key = collect(envs, act_fn, params, obs, key, config.num_steps,
-                                        episodes, step0)
+                                        episodes, step0, value_fn, config.gamma)
             jax.block_until_ready(rollout)
             t1 = time.perf_counter()
             key, update_key = jax.random.split(key)

@@ -785,7 +785,8 @@ class ScriptedHalf:
     """A stand-in for one half-batch of stori-jax envs (send/recv, snapshot/restore) playing a
     script: global env e gets reward 3 (e + 1) when (t + e) % 3 == 0 and -2 when (t + e) % 5 == 0
     on its t-th step, and its episode terminates when (t + e) % 7 == 0 or is truncated when
-    (t + 2 e) % 11 == 0.  Frames carry t and e; the actions sent are kept."""
+    (t + 2 e) % 11 == 0.  Frames carry t and e (and info's final_obs 100 + e where an episode
+    ended); the actions sent are kept."""
 
     num_actions = 4
 
@@ -812,8 +813,10 @@ class ScriptedHalf:
         terminated, truncated = (t + e) % 7 == 0, (t + 2 * e) % 11 == 0
         done = terminated | truncated
         self.returns, self.lengths = self.returns + reward, self.lengths + 1
+        final_obs = self.frames()  # the ended episodes' last frames carry 100 + e
+        final_obs[:, 0, 0, 2] = np.where(done, 100 + e, 0)
         info = dict(episode_return=np.where(done, self.returns, 0.0),
-                    episode_length=np.where(done, self.lengths, 0))
+                    episode_length=np.where(done, self.lengths, 0), final_obs=final_obs)
         self.returns = np.where(done, 0.0, self.returns)
         self.lengths = np.where(done, 0, self.lengths)
         return self.frames(), reward.astype(np.float32), terminated, truncated, info
@@ -879,6 +882,33 @@ def test_a_rollout_records_each_step_of_both_halves_with_sign_clipped_rewards():
     assert np.asarray(obs[1])[0, 0, 0, 0] == 5
     assert len(keys) == 10 and len({k.tobytes() for k in keys}) == 10, "a key per action"
     assert not any(np.array_equal(np.asarray(key), k) for k in keys)
+
+
+def test_an_episode_cut_off_at_the_cap_is_bootstrapped_from_its_final_observation():
+    """With a value function, a truncated (and not terminated) step's reward is its sign plus
+    gamma x the value of info["final_obs"]; every other step's is its sign alone, and done
+    still marks the end (GAE does not reach into the next episode)."""
+    halves = [ScriptedHalf(3, 0), ScriptedHalf(3, 3)]
+
+    def act_fn(params, obs, key):
+        return (jnp.zeros(obs.shape[0], jnp.int32), jnp.zeros(obs.shape[0]),
+                jnp.zeros(obs.shape[0]))
+
+    def value_fn(params, obs):  # the final frame's marker as its value
+        return jnp.asarray(np.asarray(obs)[:, 0, 0, 2], jnp.float32)
+
+    obs = [half.reset()[0] for half in halves]
+    steps, gamma = 12, 0.5
+    rollout, _, _ = ppo.collect(halves, act_fn, None, obs, jax.random.PRNGKey(0), steps, [],
+                                step0=0, value_fn=value_fn, gamma=gamma)
+    t, e = np.arange(1, steps + 1)[:, None], np.arange(6)[None, :]
+    raw = np.where((t + e) % 3 == 0, 3.0 * (e + 1), np.where((t + e) % 5 == 0, -2.0, 0.0))
+    terminated, truncated = (t + e) % 7 == 0, (t + 2 * e) % 11 == 0
+    cut = truncated & ~terminated
+    assert cut.any() and (truncated & terminated).any(), "both kinds of end are in the script"
+    np.testing.assert_array_equal(rollout.reward,
+                                  np.sign(raw) + np.where(cut, gamma * (100 + e), 0.0))
+    np.testing.assert_array_equal(rollout.done, terminated | truncated)
 
 
 def scripted_clock():
