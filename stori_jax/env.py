@@ -102,7 +102,7 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
     if obs not in OBS_KINDS:
         raise ValueError(f"obs must be one of {list(OBS_KINDS)}, got {obs!r}")
     if backend == "subproc":
-        check_memory(num_envs, frame_skip, screens=obs != "ram")
+        check_memory(num_envs, frame_skip, screens=obs != "ram", final=bool(autoreset))
     elif backend == "envpool":  # its buffers hold a screen per env whatever obs is
         check_memory(num_envs, frame_skip, buffers="envpool's frame buffers")
     if cfg.ram_observation and obs != "ram":
@@ -201,13 +201,15 @@ def default_split(num_envs: int, cores: int) -> tuple[int, int]:
 
 
 def check_memory(num_envs: int, frame_skip: int, screens: bool = True,
-                 buffers: str = "shared buffers", flag: str | None = None) -> None:
+                 buffers: str = "shared buffers", flag: str | None = None,
+                 final: bool = True) -> None:
     """Refuse a batch whose shared buffers alone would not fit in this machine's memory, before
     anything is allocated (a typo of num_envs would otherwise allocate for minutes, then fail
     deep inside multiprocessing, or in envpool's C++ as std::bad_alloc).  ``buffers`` names
     them in the error: envpool's are estimated by the subproc backend's, a lower bound.
-    ``flag``: the command-line flag that set num_envs (the only size it offers to change)."""
-    need = shared_bytes(num_envs, frame_skip, screens)
+    ``flag``: the command-line flag that set num_envs (the only size it offers to change).
+    ``final`` (make's default, autoreset): the buffers of the ended episodes' screens too."""
+    need = shared_bytes(num_envs, frame_skip, screens, final)
     try:
         have = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     except (ValueError, OSError, AttributeError):  # not known here: nothing to compare with
@@ -216,7 +218,8 @@ def check_memory(num_envs: int, frame_skip: int, screens: bool = True,
         asked = f"{flag} {num_envs}" if flag else f"num_envs={num_envs}"
         raise ValueError(f"{asked} with frame_skip={frame_skip} needs "
                          f"{need / 2**30:.1f} GiB of {buffers} (about "
-                         f"{shared_bytes(1, frame_skip, screens) / 2**10:.1f} KiB per env), "
+                         f"{shared_bytes(1, frame_skip, screens, final) / 2**10:.1f} KiB "
+                         "per env), "
                          f"more than this machine's {have / 2**30:.1f} GiB: choose a smaller "
                          + (flag or "num_envs or frame_skip"))
 

@@ -95,3 +95,15 @@ def test_no_final_obs_without_autoreset():
         _, info = env.reset()
         assert "final_obs" not in info
         assert "final_obs" not in env.step(np.zeros(2, np.int32))[4]
+
+
+def test_only_an_autoresetting_env_keeps_final_buffers_and_the_memory_check_counts_them():
+    from stori_jax.backends.layout import shared_bytes
+
+    with make("Breakout", obs="raw") as autoresetting, \
+            make("Breakout", obs="raw", autoreset=False) as not_autoresetting:
+        assert len(autoresetting.backend.buffers.raw["final_frames"][0]) == 2 * 2 * 210 * 160 * 3
+        assert "final_frames" not in not_autoresetting.backend.buffers.raw
+    screens = 2 * 210 * 160 * 3
+    assert shared_bytes(1, 4, final=True) - shared_bytes(1, 4, final=False) > screens
+    assert shared_bytes(1, 4, screens=False, final=True) < 1024 < screens
