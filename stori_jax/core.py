@@ -226,13 +226,13 @@ def final_observations(plan: Plan, game, draws: Draws, out: WorkerOutputs, obs):
         return obs + jnp.uint8(0)
     final, _ = observe(plan, game, draws, out.final_frames, out.final_ram, out.ram_rendered,
                        out.final_single_frame, jnp.zeros((plan.num_envs,), bool))
-    return jnp.where(ended(out, obs.ndim), final, obs)
+    done = ended(out)
+    return jnp.where(jnp.reshape(done, done.shape + (1,) * (obs.ndim - 1)), final, obs)
 
 
-def ended(out: WorkerOutputs, ndim: int = 1):
-    """(B,) bool where the step ended an episode, with ``ndim - 1`` axes to broadcast."""
-    done = (out.terminated != 0) | (out.truncated != 0)
-    return jnp.reshape(done, done.shape + (1,) * (ndim - 1))
+def ended(out: WorkerOutputs):
+    """(B,) bool where the step ended an episode (numpy for numpy outputs)."""
+    return (out.terminated != 0) | (out.truncated != 0)
 
 
 @functools.partial(jax.jit, static_argnames=("plan",))
@@ -282,7 +282,7 @@ def finish_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, r
     step of ``env.xla()``: (new state, (obs, reward, terminated, truncated, info), the envs
     due for a reset on the next step).  ``reset_first`` (B,) bool marks envs that were reset
     instead of stepped (next-step autoreset, or a reset of all)."""
-    done = (out.terminated != 0) | (out.truncated != 0)
+    done = ended(out)
     new_episode = reset_first | done if plan.autoreset else reset_first
     state, obs, reward, terminated, truncated, info = after_step(
         plan, state, draws, out, new_episode, reset_first)

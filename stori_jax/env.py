@@ -23,7 +23,7 @@ from stori_jax.checks import (MAX_INT32, MAX_SEED, check_actions, check_int, che
                               shown)
 from stori_jax.config import Config, GRANULARITIES
 from stori_jax.core import (FINAL_OUTPUTS, FRAME_OUTPUTS, STEP_OUTPUTS, Draws, EnvState,
-                            WorkerOutputs, before_step, finish_step, initial_state)
+                            WorkerOutputs, before_step, ended, finish_step, initial_state)
 from stori_jax.fork_guard import refuse_if_forked_after_jax
 from stori_jax.functional.preprocess import ATARI84, DREAMER64, STACK
 from stori_jax.games import get_game
@@ -708,10 +708,9 @@ class Env:
     def _finish(self, state, draws, out, reset_first):
         """((obs, reward, terminated, truncated, info), envs due for a reset) of the workers'
         outputs ``out``; the env's state moves on."""
-        names = STEP_OUTPUTS
-        if self.plan.autoreset and (out["terminated"].any() or out["truncated"].any()):
-            names += FINAL_OUTPUTS  # the ended episodes' last observations
-        outputs = WorkerOutputs(**{name: out[name] for name in names})
+        outputs = WorkerOutputs(**{name: out[name] for name in STEP_OUTPUTS})
+        if self.plan.autoreset and ended(outputs).any():  # the ended episodes' last observations
+            outputs = outputs._replace(**{name: out[name] for name in FINAL_OUTPUTS})
         state, result, pending = finish_step(self._jit_plan, state, draws, outputs, reset_first)
         # the workers overwrite their buffers on the next send: finish reading them now
         jax.block_until_ready(result)
