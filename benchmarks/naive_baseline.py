@@ -60,7 +60,7 @@ class StoriNumpyWrapper(gym.Wrapper):
 
     def _active_parts(self) -> set:
         """The part types acting on this agent step: all of them, except that a 2.2 preset's
-        concept-2 parts act only where its schedule (STORI_SPEC section 3) says concept 2."""
+        concept-2 parts act only where its schedule (docs/spec.md section 3) says concept 2."""
         concept2 = False
         if self.drift is not None:
             k, period = self.episode_step, self.drift.period

@@ -1,4 +1,4 @@
-"""Information-theoretic and variance helpers from the STORI paper (STORI_SPEC sections 1, 11).
+"""Information-theoretic and variance helpers from the STORI paper (docs/spec.md sections 1, 11).
 
 - ``action_channel_capacity(n, p)``: capacity I(A; Ã) in bits of the type-1 channel that replaces
   the intended action, with probability p, by one drawn uniformly from all n actions.

@@ -1,4 +1,5 @@
-"""The 24 presets of the paper's experiments (STORI_SPEC section 10), addressable as (game, name)."""
+"""The 24 presets of the paper's experiments (docs/spec.md section 10), addressable as
+(game, name)."""
 
 from __future__ import annotations
 

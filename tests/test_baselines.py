@@ -1274,7 +1274,7 @@ def test_table_aggregates_seeds_beside_the_paper(tmp_path):
 
 
 def test_paper_results_are_the_spec_table():
-    """STORI_SPEC section 11, typed in from the spec (every row, DreamerV3 mean ± std and STORM
+    """docs/spec.md section 11, typed in from it (every row, DreamerV3 mean ± std and STORM
     mean ± std), against the table the results are printed beside."""
     spec = """
         Breakout 1 8.67 0.30 9.20 1.72
@@ -1438,7 +1438,7 @@ PAPER_LAYOUT = [("Breakout", p) for p in ("1", "2.1", "2.2", "3.1", "3.2A", "3.2
 
 
 def test_the_table_rows_follow_the_papers_layout(tmp_path):
-    """STORI_SPEC section 11's row order: Breakout, Boxing, Gopher, BankHeist, each from type 1
+    """docs/spec.md section 11's row order: Breakout, Boxing, Gopher, BankHeist, each from type 1
     to 3.2, whatever order the evaluations are found in."""
     for i, (game, preset) in enumerate(reversed(PAPER_LAYOUT)):
         fake_eval(tmp_path / f"{i:02d}", game, preset, "ppo", 0, float(i))

@@ -15,7 +15,7 @@ from stori_jax import (ActionNoise, Config, ConceptDrift, ObservationMask, Rando
 from stori_jax.checks import check_probability
 
 STORI = "['Breakout', 'Boxing', 'Gopher', 'BankHeist']"
-SPEC_MODE_COUNTS = {  # blackout, RAM, event modes (STORI_SPEC sections 5-8)
+SPEC_MODE_COUNTS = {  # blackout, RAM, event modes (docs/spec.md sections 5-8)
     "Breakout": (11, 2, 3), "Boxing": (9, 3, 3), "Gopher": (18, 5, 3), "BankHeist": (10, 6, 4),
 }
 SECONDARY = re.escape("['1', '2.1', '3.2']")

@@ -1,4 +1,4 @@
-"""The paper's 24 presets (STORI_SPEC section 10) and the reference configuration format."""
+"""The paper's 24 presets (docs/spec.md section 10) and the reference configuration format."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from stori_jax import (ActionNoise, Config, ConceptDrift, ObservationMask, Rando
 from stori_jax.reference_format import config_from_reference
 
 # ---------------------------------------------------------------------------------------------
-# STORI_SPEC section 10, typed in: (game, name, definition in the spec's words, parts)
+# docs/spec.md section 10, typed in: (game, name, definition in the spec's words, parts)
 # ---------------------------------------------------------------------------------------------
 
 

@@ -135,12 +135,12 @@ def test_drift_to_action_noise_restarts_after_autoreset():
 
 
 def test_drift_to_an_event_keeps_the_episode_start_ram():
-    """STORI_SPEC 9b: the switch to concept 2 does not re-read the episode-start RAM. Breakout,
-    sudden T = 200 to regenerate-a-hit-block (mode 3, p = 1, per frame), a ball-tracking
-    policy: the blocks hit in concept 1 stay missing until step T, whose four frames write them
-    back to their values at the reset, one per frame; from then on the blocks are the reset's
-    (a block hit is regenerated in its own frame). Re-reading the RAM at the switch would take
-    the missing blocks as the start and never bring them back."""
+    """docs/spec.md section 9b: the switch to concept 2 does not re-read the episode-start RAM.
+    Breakout, sudden T = 200 to regenerate-a-hit-block (mode 3, p = 1, per frame), a
+    ball-tracking policy: the blocks hit in concept 1 stay missing until step T, whose four
+    frames write them back to their values at the reset, one per frame; from then on the blocks
+    are the reset's (a block hit is regenerated in its own frame). Re-reading the RAM at the
+    switch would take the missing blocks as the start and never bring them back."""
     T = 200
     config = drift("sudden", T, Config(event=RandomEvent(3, 1.0)))
     env = make("Breakout", config)

@@ -1,6 +1,6 @@
 """Type 2.1 events of every game, through ``stori_jax.make`` on real emulators.
 
-Each event is checked against STORI_SPEC (sections 5-8, with the corrected **Defect** rules): how
+Each event is checked against docs/spec.md (sections 5-8, with their **Correction** rules): how
 often it fires (``info['event_fired']`` counts firings per step) and what it does to the RAM and
 the reward, mostly by comparing with a 3.1 twin (same seed, same actions).
 """
@@ -390,8 +390,9 @@ def test_boxing_displace_moves_boxers_to_each_others_start_corner():
 
 
 def test_events_fire_in_silence(capfd):
-    """Spec 9b: the reference's event code printed on every firing.  Here nothing is written to
-    stdout or stderr, by this process (an inline env) or by a worker, at every firing."""
+    """docs/spec.md section 9b: the reference's event code printed on every firing.  Here
+    nothing is written to stdout or stderr, by this process (an inline env) or by a worker, at
+    every firing."""
     env = make("Boxing", event(3, 1.0), num_envs=2, inline_envs=1)
     try:
         env.reset()
@@ -405,10 +406,10 @@ def test_events_fire_in_silence(capfd):
 
 
 def test_the_episode_start_ram_is_read_before_the_no_ops():
-    """Spec 9: the episode-start RAM is the RAM right after the reset.  With no-ops after the
-    reset (noop_max 30) Boxing's enemy walks away from its start corner first; displacing
-    (mode 3) still sends the player to the enemy's start corner, as without no-ops (it went to
-    where the no-ops had left the enemy)."""
+    """docs/spec.md (Conventions, section 9b): the episode-start RAM is the RAM right after the
+    reset.  With no-ops after the reset (noop_max 30) Boxing's enemy walks away from its start
+    corner first; displacing (mode 3) still sends the player to the enemy's start corner, as
+    without no-ops (it went to where the no-ops had left the enemy)."""
     plain = make("Boxing", num_envs=1, frame_skip=1)
     ev = make("Boxing", event(3, 1.0), num_envs=1, frame_skip=1, noop_max=30, seed=3)
     try:
@@ -470,8 +471,8 @@ def test_gopher_hole_rule_leaves_the_new_round_refill_alone():
     """Under NOOP the farmer never fills, but after the gopher eats a carrot the game itself
     refills the underground for the next round (68 bits on step 731 of seed 0, no points).
     Modes 1 and 2 at p = 1 must not undo that refill: the RAM stays the 3.1 twin's, step for
-    step, and the event never fires.  (The spec's literal rule, any bit cleared, restored the
-    old tunnels into the new round.)"""
+    step, and the event never fires.  (A rule that counts any cleared bit as a fill restored
+    the old tunnels into the new round: docs/spec.md section 7.)"""
     steps = 735
     envs = [make("Gopher", event(1, 1.0)), make("Gopher", event(2, 1.0)), make("Gopher")]
     try:

@@ -147,9 +147,9 @@ def test_ram_obs_mode_changes_the_observation_only(game, mode):
 
 @pytest.mark.parametrize("autoreset", [True, False])
 def test_ram_obs_mode_leaves_the_game_alone_across_episode_ends(autoreset):
-    """Spec 4.2: the rendered frame is not part of the game, across episode ends too: RAM,
-    rewards, ends and lives equal the twin's through three truncations at 40 frames (the
-    render must not count toward the frame cap, nor survive into the next episode)."""
+    """docs/spec.md section 4.2: the rendered frame is not part of the game, across episode ends
+    too: RAM, rewards, ends and lives equal the twin's through three truncations at 40 frames
+    (the render must not count toward the frame cap, nor survive into the next episode)."""
     actions = actions_of("Breakout", 33)
     run, twin = lockstep_with_twin("Breakout", Config(observation=ObservationMask("ram", 2, 1.0)),
                                    len(actions), lambda k, runs: actions[k], obs="raw",
@@ -158,7 +158,7 @@ def test_ram_obs_mode_leaves_the_game_alone_across_episode_ends(autoreset):
     assert run.stacked("truncated")[:, 0].sum() == 3
 
 
-# the bytes each mode writes, from STORI_SPEC sections 5-8 (not from the library's tables);
+# the bytes each mode writes, from docs/spec.md sections 5-8 (not from the library's tables);
 # None: the mode's condition is not met, nothing is rendered and the observation is the screen
 def _slots_equal(value):
     def writes(ram):
@@ -194,10 +194,10 @@ RAM_WRITES_RUN = {("Gopher", 5): (2, 2, 5400), ("BankHeist", 6): (5, 3, 2000)}
     pytest.param(*case, marks=pytest.mark.slow) if case in RAM_WRITES_RUN else case
     for case in SPEC_RAM_WRITES])
 def test_ram_obs_mode_shows_the_next_noop_frame_of_the_written_ram(game, mode):
-    """STORI_SPEC 4.2 on a bare ale-py emulator beside the env: save the state, write the mode's
-    bytes, run one NOOP frame, take that screen, restore. Every observation must be that screen,
-    pixel for pixel, or the true screen where a conditional mode's condition is not met (one
-    env, frame_skip 1, p = 1, random steps)."""
+    """docs/spec.md section 4.2 on a bare ale-py emulator beside the env: save the state, write the
+    mode's bytes, run one NOOP frame, take that screen, restore. Every observation must be that
+    screen, pixel for pixel, or the true screen where a conditional mode's condition is not met
+    (one env, frame_skip 1, p = 1, random steps)."""
     seed, action_seed, steps = RAM_WRITES_RUN.get((game, mode), (5, 3, 80))
     env = stori_jax.make(game, config=Config(observation=ObservationMask("ram", mode, 1.0)),
                          obs="raw", num_envs=1, seed=seed, frame_skip=1, num_workers=1,
@@ -351,8 +351,8 @@ def test_boxing_hide_enemy_removes_the_black_boxer():
 @pytest.mark.parametrize("mode,score,colour", [(2, (87, 134, 1, 16), BLACK),
                                                (3, (33, 69, 1, 16), (214, 214, 214))])
 def test_boxing_hiding_a_boxer_hides_its_score(mode, score, colour):
-    """STORI_SPEC 6: RAM mode 2 (enemy) and 3 (player) also hide that side's score digits,
-    drawn in the boxer's colour in the spec's score region."""
+    """docs/spec.md section 6: RAM mode 2 (enemy) and 3 (player) also hide that side's score
+    digits, drawn in the boxer's colour in the score region given there."""
     run, twin = masked_run("Boxing", ObservationMask("ram", mode, 1.0)), twin_run("Boxing")
     x0, x1, y0, y1 = score
 
@@ -365,13 +365,13 @@ def test_boxing_hiding_a_boxer_hides_its_score(mode, score, colour):
 
 @pytest.mark.parametrize("mode,address", [(1, 3), (2, 2), (3, 1)])
 def test_a_ram_mode_shows_boxings_colour_flip(mode, address):
-    """STORI_SPEC 6 and 4.2 on a bare emulator beside the env: the flip's colours are written
-    before EVERY frame, the hidden NOOP frame of a RAM mode included (it showed the game's own
-    colours: a flip combined with a RAM mode was invisible whenever the mode rendered). Colour
-    flip at p = 1 toggles every frame; the RAM mode renders every observation: mode 1 (hide the
-    ring, RAM 3) or mode 2 / 3 (hide the enemy / player: RAM 2 / 1, which the flip writes too).
-    The flip's standing writes come first, the mode's own last: a hidden boxer stays hidden
-    (the flip's colour written over the mode's 214 showed it)."""
+    """docs/spec.md sections 6 and 4.2 on a bare emulator beside the env: the flip's colours are
+    written before EVERY frame, the hidden NOOP frame of a RAM mode included (it showed the
+    game's own colours: a flip combined with a RAM mode was invisible whenever the mode
+    rendered). Colour flip at p = 1 toggles every frame; the RAM mode renders every observation:
+    mode 1 (hide the ring, RAM 3) or mode 2 / 3 (hide the enemy / player: RAM 2 / 1, which the
+    flip writes too). The flip's standing writes come first, the mode's own last: a hidden boxer
+    stays hidden (the flip's colour written over the mode's 214 showed it)."""
     from stori_jax import RandomEvent
 
     config = Config(event=RandomEvent(1, 1.0), observation=ObservationMask("ram", mode, 1.0))
@@ -419,7 +419,7 @@ def region(x0, x1, y0, y1, fill=BLACK):
     return (x0, x1, y0, y1, fill)
 
 
-# written from STORI_SPEC sections 4-8 (not from the library's tables); painted in order
+# written from docs/spec.md sections 4-8 (not from the library's tables); painted in order
 SPEC_MASKS = {
     ("Breakout", "blackout", 1): [region(8, 151, 57, 92), region(7, 152, 189, 195),
                                   region(2, 158, 3, 16), region(8, 151, 105, 130),
@@ -523,7 +523,8 @@ def test_torch_shows_a_disc_of_radius_75_and_blacks_out_the_rest():
 
 
 def torch_screen(screen, centre):
-    """``screen`` with every pixel farther than 75 from ``centre`` (x, y) black (STORI_SPEC 4.1)."""
+    """``screen`` with every pixel farther than 75 from ``centre`` (x, y) black (docs/spec.md
+    section 4.1)."""
     ys, xs = np.mgrid[:210, :160]
     hidden = (xs - int(centre[0])) ** 2 + (ys - int(centre[1])) ** 2 > 75 ** 2
     return np.where(hidden[..., None], np.uint8(0), screen)
@@ -806,7 +807,7 @@ def test_type0_boxing_labels_follow_the_scores():
     assert set(np.diff(clock, axis=0).ravel().tolist()) == {0, -1}
 
 
-# the labels of STORI_SPEC sections 7 and 8 and the RAM bytes they read (label: address)
+# the labels of docs/spec.md sections 7 and 8 and the RAM bytes they read (label: address)
 SPEC_LABEL_BYTES = {
     "Gopher": {"farmer_x": 31, "seed_y": 92, "seed_x": 95, "underground_row0_0": 0,
                "underground_row3_5": 23, "duck_25": 25, "duck_94": 94},

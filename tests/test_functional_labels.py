@@ -64,7 +64,7 @@ def test_breakout_score_label_equals_running_reward_on_real_ram():
     # the play is good enough to exercise several point values and the hundreds byte
     assert len(np.unique(np.diff(totals))) >= 3, np.unique(np.diff(totals))
     assert totals[-1] >= 100, totals[-1]
-    # the other labels are the RAM bytes of the spec
+    # the other labels are the RAM bytes of docs/spec.md section 5
     np.testing.assert_array_equal(np.asarray(labels["ball_x"]), rams[:, 99])
     np.testing.assert_array_equal(np.asarray(labels["ball_y"]), rams[:, 101])
     np.testing.assert_array_equal(np.asarray(labels["player_x"]), rams[:, 72])

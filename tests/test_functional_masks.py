@@ -1,7 +1,7 @@
 """Type 3.2 screen masks (stori_jax.functional.masks), pixel-exact on real ALE screens.
 
-The expected pictures are computed here from STORI_SPEC sections 4.1 and 5-8 (regions typed in from
-the spec, painted per pixel with inclusive bounds), independently of the library's region tables.
+The expected pictures are computed here from docs/spec.md sections 4.1 and 5-8 (regions typed in
+from it, painted per pixel with inclusive bounds), independently of the library's region tables.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ H, W = 210, 160
 SIGMAS = 5.0
 
 # ---------------------------------------------------------------------------------------------
-# The spec's tables, typed in from STORI_SPEC (x0, x1, y0, y1, fill), inclusive
+# The spec's tables, typed in from docs/spec.md (x0, x1, y0, y1, fill), inclusive
 # ---------------------------------------------------------------------------------------------
 
 BLACK = (0, 0, 0)

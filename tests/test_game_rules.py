@@ -222,7 +222,7 @@ def test_breakout_ram_obs():
 
 
 def test_breakout_nus_pattern_has_the_spec_values():
-    """STORI_SPEC section 5, RAM mode 1, typed in from the spec (not the library's copy): these
+    """docs/spec.md section 5, RAM mode 1, typed in from it (not the library's copy): these
     29 block bytes and no others, whatever the current RAM."""
     spec = {0: 62, 1: 61, 2: 60, 3: 62, 5: 60, 6: 240, 7: 127, 8: 120, 9: 112, 10: 119, 11: 120,
             12: 0, 13: 240, 14: 240, 15: 240, 16: 240, 17: 240, 18: 57, 19: 218, 20: 219,
@@ -561,7 +561,7 @@ def test_bankheist_bank_was_empty():
 
 
 def test_bankheist_labels():
-    """Every label reads the spec's address (section 8): each byte holds a value of its own
+    """Every label reads its address in docs/spec.md section 8: each byte holds a value of its own
     (address + 101), so a label that reads a neighbour's byte shows (direction read 16, the
     background colour 66, and the test did not see it)."""
     ram = (np.arange(128) + 101).astype(np.int32)

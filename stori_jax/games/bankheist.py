@@ -1,4 +1,4 @@
-"""BankHeist (STORI_SPEC section 8). 18 actions; type 1 replaces actions from 0..9
+"""BankHeist (docs/spec.md section 8). 18 actions; type 1 replaces actions from 0..9
 (NOOP, FIRE and the eight directions: the reference's set; it leaves out the eight moves that
 also fire, though FIRE itself, index 1, stays in).
 """

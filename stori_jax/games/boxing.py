@@ -1,4 +1,4 @@
-"""Boxing (STORI_SPEC section 6). 18 actions (the full set is also the minimal set)."""
+"""Boxing (docs/spec.md section 6). 18 actions (the full set is also the minimal set)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Breakout (STORI_SPEC section 5). 4 actions: NOOP, FIRE, RIGHT, LEFT."""
+"""Breakout (docs/spec.md section 5). 4 actions: NOOP, FIRE, RIGHT, LEFT."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Gopher (STORI_SPEC section 7). 8 actions: NOOP, FIRE, UP, RIGHT, LEFT, UPFIRE, RIGHTFIRE,
+"""Gopher (docs/spec.md section 7). 8 actions: NOOP, FIRE, UP, RIGHT, LEFT, UPFIRE, RIGHTFIRE,
 LEFTFIRE."""
 
 from __future__ import annotations
@@ -92,8 +92,8 @@ def _hole_stays_open(zero_reward: bool):
         # A fill is a bit this frame clears (1 before, 0 now) while scoring: the farmer's fill
         # earns 20 points on the frame that clears it.  Digging (setting bits) is left alone,
         # and so is the game's own refilling of the whole underground when a new round starts
-        # after a carrot is eaten (17-68 bits at once, no points; STORI_SPEC section 7 assumes
-        # only the farmer clears bits).
+        # after a carrot is eaten (17-68 bits at once, no points; docs/spec.md sections 7
+        # and 12).
         fills = prev_ram[UNDERGROUND_RAM] & ~ram[UNDERGROUND_RAM]
         if not np.any(fills) or not u < p:
             return NO_EVENT
