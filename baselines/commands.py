@@ -1,5 +1,6 @@
-"""``stori-jax train ppo``, ``stori-jax eval`` and ``stori-jax table``: the baselines' command
-line, registered by :mod:`stori_jax.cli`."""
+"""``stori-jax train AGENT``, ``stori-jax eval`` and ``stori-jax table``: the baselines' command
+line, which :mod:`baselines.plugin` adds to ``stori-jax``.  Every agent of
+:mod:`baselines.agents` is served by the same code."""
 
 from __future__ import annotations
 
@@ -8,26 +9,28 @@ import shlex
 import sys
 from pathlib import Path
 
+from baselines.agents import agent_names, get_agent, load_checkpoint
 from baselines.evaluate import CHECKPOINT_POLICIES, EVAL_NUM_ENVS
 from stori_jax.env import MAX_EPISODE_FRAMES
 
 
 def add_parsers(sub) -> None:
-    train = sub.add_parser("train", help="train a baseline agent on a preset (PPO)")
-    train.add_argument("agent", choices=["ppo"], help="the algorithm")
+    train = sub.add_parser("train", help="train a baseline agent on a preset")
+    train.set_defaults(handler=cmd_train)
+    train.add_argument("agent", choices=agent_names(), help="the algorithm")
     train.add_argument("--game", required=True, help="Breakout, Boxing, Gopher or BankHeist")
     train.add_argument("--preset", default="3.1", help="paper preset (default 3.1)")
     train.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
     train.add_argument("--steps", type=int, default=100_000,
                        help="agent steps in total (default 100000)")
     train.add_argument("--out", type=Path, default=None,
-                       help="run directory (default results/train/<game>-<preset>/ppo-seed<S>)")
+                       help="run directory (default results/train/<game>-<preset>/<agent>-seed<S>)")
     train.add_argument("--resume", action="store_true",
                        help="continue from the run directory's checkpoint.pkl")
     train.add_argument("--set", dest="overrides", action="append", default=[],
                        metavar="FIELD=VALUE",
-                       help="any PPO hyperparameter but game, preset, seed and steps (their own "
-                            "flags), e.g. network=nips")
+                       help="any hyperparameter of the agent but game, preset, seed and steps "
+                            "(their own flags), e.g. network=nips")
     train.add_argument("--eval-episodes", type=int, default=0,
                        help="evaluate the final policy for this many episodes (default 0: "
                             "not now; stori-jax eval does it later)")
@@ -37,7 +40,9 @@ def add_parsers(sub) -> None:
 
     ev = sub.add_parser("eval", help="the evaluation protocol: N episodes of a checkpoint's "
                                      "policy (or the random policy) on its preset")
-    ev.add_argument("--checkpoint", type=Path, default=None, help="a PPO checkpoint.pkl")
+    ev.set_defaults(handler=cmd_eval)
+    ev.add_argument("--checkpoint", type=Path, default=None,
+                    help="a trained agent's checkpoint.pkl")
     ev.add_argument("--random", action="store_true", help="the uniformly random policy instead "
                                                           "(needs --game and --preset)")
     ev.add_argument("--game", default=None, help="with --random: the game")
@@ -66,6 +71,7 @@ def add_parsers(sub) -> None:
 
     table = sub.add_parser("table", help="aggregate evaluations into the paper's table and plot "
                                          "learning curves")
+    table.set_defaults(handler=cmd_table)
     table.add_argument("results_dir", type=Path,
                        help="a folder of runs (<game>-<preset>/<agent>-seed<S>/eval-*.json)")
     table.add_argument("--out", type=Path, default=None, help="default: RESULTS_DIR")
@@ -86,6 +92,33 @@ def _parse_overrides(items: list[str]) -> dict[str, str]:
     return overrides
 
 
+FLAGS = {"game": "--game", "preset": "--preset", "seed": "--seed", "total_steps": "--steps"}
+
+
+def agent_config(agent, game: str, preset: str, seed: int, steps: int, overrides: list[str]):
+    """The ``agent``'s config of a run: game, preset, seed and steps from their flags, every
+    other hyperparameter from ``--set FIELD=VALUE`` items; errors name the flag."""
+    parsed = _parse_overrides(overrides)
+    settable = sorted(f.name for f in dataclasses.fields(agent.config_class)
+                      if f.name not in FLAGS)
+    for name in parsed:
+        if name in FLAGS:
+            raise ValueError(f"set {name} with {FLAGS[name]}, not --set")
+        if name not in settable:
+            raise ValueError(f"unknown {agent.title} hyperparameter {name!r}; --set takes "
+                             f"{settable}")
+    try:
+        return agent.config_class.from_overrides(  # checked once, --steps with the --set values
+            agent.config_class(game=game, preset=preset, seed=seed),
+            {**parsed, "total_steps": str(steps)})
+    except ValueError as error:  # name the flag the user gave, not the config field
+        message = str(error)
+        for name, flag in FLAGS.items():
+            if message.startswith(name + " "):
+                raise ValueError(flag + message[len(name):]) from None
+        raise
+
+
 def run_dir(root: Path, game: str, preset: str, agent: str, seed: int) -> Path:
     """Where a run's files live: ``root``/<game>-<preset>/<agent>-seed<seed>."""
     return Path(root) / f"{game}-{preset}" / f"{agent}-seed{seed}"
@@ -104,60 +137,47 @@ def check_no_result(path: Path, force: bool, elsewhere: str = "another --out"):
 def cmd_train(args) -> int:
     from baselines.evaluate import (EVAL_SEED_OFFSET, check_eval_seed, evaluate, result_path,
                                     write_result)
-    from baselines.ppo import PPOConfig, check_no_finished_run, check_no_run_here, train
+    from baselines.runs import check_no_finished_run, check_no_run_here
     from stori_jax.checks import check_int
     from stori_jax.cli import check_out
     from stori_jax.folders import removed_if_left_empty
 
     check_int("--eval-episodes", args.eval_episodes, 0)
-    overrides = _parse_overrides(args.overrides)
-    flags = {"game": "--game", "preset": "--preset", "seed": "--seed", "total_steps": "--steps"}
-    settable = sorted(f.name for f in dataclasses.fields(PPOConfig) if f.name not in flags)
-    for name in overrides:
-        if name in flags:
-            raise ValueError(f"set {name} with {flags[name]}, not --set")
-        if name not in settable:
-            raise ValueError(f"unknown PPO hyperparameter {name!r}; --set takes {settable}")
-    try:
-        config = PPOConfig.from_overrides(  # checked once, --steps with the --set values
-            PPOConfig(game=args.game, preset=args.preset, seed=args.seed),
-            {**overrides, "total_steps": str(args.steps)})
-    except ValueError as error:  # name the flag the user gave, not the config field
-        message = str(error)
-        for name, flag in flags.items():
-            if message.startswith(name + " "):
-                raise ValueError(flag + message[len(name):]) from None
-        raise
-    out = args.out or run_dir(DEFAULT_ROOT, config.game, config.preset, "ppo", config.seed)
+    agent = get_agent(args.agent)
+    config = agent_config(agent, args.game, args.preset, args.seed, args.steps, args.overrides)
+    out = args.out or run_dir(DEFAULT_ROOT, config.game, config.preset, agent.name, config.seed)
     check_out("--out", out, directory=True)
     if args.resume and not (out / "checkpoint.pkl").exists():
-        check_no_finished_run(out, "--resume: ")  # a finished run's checkpoint is gone
+        check_no_finished_run(out, "--resume: ",  # a finished run's checkpoint is gone
+                              elsewhere=f"stori-jax train {agent.name} ... --out DIR")
         raise ValueError(f"--resume: {out} holds no checkpoint.pkl (a run stopped before its "
                          "first checkpoint has nothing to continue): run without --resume")
     if not args.resume:  # train() checks it too: here, before the evaluation's checks
-        check_no_run_here(out)
+        check_no_run_here(out, agent.name)
     if args.force and not args.eval_episodes:
         raise ValueError("--force replaces an evaluation: it needs --eval-episodes")
     if args.eval_episodes:  # checked before training, not after it
-        check_eval_seed(config.seed, config.seed + EVAL_SEED_OFFSET,
+        check_eval_seed(agent.train_env_seeds(config.seed), config.seed,
+                        config.seed + EVAL_SEED_OFFSET,
                         "train without --eval-episodes, then run stori-jax eval --checkpoint "
                         f"{out}/checkpoint.pkl --eval-seed S")
         check_no_result(result_path(out, "sampled"), args.force,
                         "train without --eval-episodes, then run stori-jax eval --checkpoint "
                         f"{out}/checkpoint.pkl --out DIR")
-    trained = config.num_iterations * config.batch_size
+    per_iteration = agent.steps_per_iteration(config)
+    trained = -(-config.total_steps // per_iteration) * per_iteration
     if trained != config.total_steps:
         print(f"stori-jax: --steps {config.total_steps} rounds up to {trained} agent steps, whole "
-              f"iterations of num_envs x num_steps = {config.batch_size}", file=sys.stderr)
+              f"iterations of {per_iteration} agent steps", file=sys.stderr)
     try:
         with removed_if_left_empty(out):  # a run stopped before writing anything leaves nothing
-            summary = train(config, out, resume=args.resume, progress=not args.quiet)
+            summary = agent.train(config, out, resume=args.resume, progress=not args.quiet)
     except KeyboardInterrupt:
         if (out / "checkpoint.pkl").exists():
             print(f"stori-jax: the last checkpoint is in {out}; continue with the same command "
                   "and --resume", file=sys.stderr)
         raise
-    trained_now = summary["iterations_now"] * config.batch_size
+    trained_now = summary["agent_steps_now"]
     if trained_now == 0:
         print(f"nothing to train: {out} holds a finished run of {summary['agent_steps']} agent "
               "steps (a run trains to its --steps; a longer one starts in another --out)")
@@ -201,7 +221,6 @@ def cmd_eval(args) -> int:
     import stori_jax
     from baselines.evaluate import (EVAL_SEED_OFFSET, evaluate, result_path, stori_game,
                                     write_result)
-    from baselines.ppo import load_checkpoint
     from stori_jax.checks import MAX_INT32, MAX_SEED, check_int
     from stori_jax.cli import check_out
     from stori_jax.env import FRAME_SKIP, check_memory
@@ -230,7 +249,7 @@ def cmd_eval(args) -> int:
         out = args.out or run_dir(DEFAULT_ROOT, game, preset, "random", seed)
         checkpoint = None
     else:
-        config = load_checkpoint(args.checkpoint)["config"]
+        config = load_checkpoint(args.checkpoint)[1]["config"]
         game = args.game if args.game is None else game_flag(args.game)
         # the training seed labels the result (and the table's seed column): it is the checkpoint's
         for flag, value, trained in (("--game", game, stori_game(config["game"])),
@@ -290,5 +309,4 @@ def cmd_table(args) -> int:
     return 0
 
 
-COMMANDS = {"train": cmd_train, "eval": cmd_eval, "table": cmd_table}
 

@@ -1,8 +1,9 @@
 """The paper's evaluation protocol: a fixed number of whole episodes (100 by default) of a
 policy on its preset, from evaluation seeds apart from the training seeds.
 
-Policies: a PPO checkpoint, acting ``sampled`` (from its distribution) or ``greedy`` (argmax),
-or the uniformly ``random`` policy, the baseline every table shows beside the agents.
+Policies: a trained agent's checkpoint, acting ``sampled`` (from its distribution, or the
+agent's own exploration) or ``greedy`` (argmax), or the uniformly ``random`` policy, the
+baseline every table shows beside the agents.
 
 Episodes are shared out over the envs in fixed quotas (env i plays its first quota[i] episodes),
 so the sample does not favour short episodes, and a seed gives the same returns every time.
@@ -43,14 +44,12 @@ def stori_game(name: str) -> str:
     return game
 
 
-def check_eval_seed(train_seed: int, eval_seed: int, advice: str) -> None:
-    """Refuse an evaluation seed that is one of the training envs' own (the evaluation would
-    replay training's episodes); ``advice`` says what to do instead."""
-    from baselines.ppo import train_env_seeds
-
-    if eval_seed in train_env_seeds(train_seed):
+def check_eval_seed(train_env_seeds, train_seed: int, eval_seed: int, advice: str) -> None:
+    """Refuse an evaluation seed that is one of the training envs' own ``train_env_seeds``
+    (the evaluation would replay training's episodes); ``advice`` says what to do instead."""
+    if eval_seed in train_env_seeds:
         raise ValueError(f"eval seed {eval_seed} is one of the training envs' seeds "
-                         f"{list(train_env_seeds(train_seed))} (training seed {train_seed}): "
+                         f"{list(train_env_seeds)} (training seed {train_seed}): "
                          f"the evaluation would replay training's episodes; {advice}")
 
 
@@ -79,12 +78,14 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100,
     preset = canonical_preset(game, preset)
     num_envs = min(num_envs, episodes)
     trained = {}  # how far the checkpoint's run had trained (a table notes other budgets)
+    agent_name = "random"
     if checkpoint is not None:
-        from baselines.ppo import load_checkpoint, policy_of, training_progress
+        from baselines.agents import load_checkpoint
 
-        ckpt = load_checkpoint(checkpoint)
-        config, choose = policy_of(ckpt, policy)
-        trained = training_progress(ckpt)
+        agent, ckpt = load_checkpoint(checkpoint)
+        agent_name = agent.name
+        config, choose = agent.policy_of(ckpt, policy)
+        trained = agent.training_progress(ckpt)
         if (config.game, config.preset) != (game, preset):
             raise ValueError(f"checkpoint {checkpoint} was trained on {config.game} "
                              f"{config.preset}, not {game} {preset}")
@@ -94,8 +95,8 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100,
                              "eval_seed)")
         seed = config.seed
         eval_seed = seed + EVAL_SEED_OFFSET if eval_seed is None else eval_seed
-        check_eval_seed(seed, eval_seed, "choose another --eval-seed (by default "
-                        f"the training seed + {EVAL_SEED_OFFSET})")
+        check_eval_seed(agent.train_env_seeds(seed), seed, eval_seed, "choose another "
+                        f"--eval-seed (by default the training seed + {EVAL_SEED_OFFSET})")
     else:
         from stori_jax.suite import random_policy
 
@@ -133,7 +134,7 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100,
                         bar.update()
         bar.close()
     flat = [r for env_returns in returns for r in env_returns]
-    return dict(game=game, preset=preset, agent="random" if policy == "random" else "ppo",
+    return dict(game=game, preset=preset, agent=agent_name,
                 policy=policy, train_seed=seed, eval_seed=eval_seed, episodes=episodes,
                 num_envs=num_envs, max_episode_frames=max_episode_frames,
                 checkpoint=None if checkpoint is None else str(checkpoint), **trained,

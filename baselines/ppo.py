@@ -11,13 +11,10 @@ emulators' states too).  Command line: ``stori-jax train ppo --game Breakout --p
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import json
 import os
-import pickle
 import time
-import warnings
 from pathlib import Path
 from typing import NamedTuple
 
@@ -28,7 +25,11 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from baselines.agents import Agent
 from baselines.evaluate import CHECKPOINT_POLICIES, stori_game
+from baselines.runs import (append_csv, check_no_finished_run, check_no_run_here,  # noqa: F401
+                            read_checkpoint, recorded_parts, rewrite_csv, rows_upto,
+                            save_checkpoint, software_parts, write_summary)
 from stori_jax.checks import check_int, check_real
 from stori_jax.core import agent_key
 from stori_jax.presets import canonical_preset
@@ -487,36 +488,21 @@ def make_update(network, optimizer, config: PPOConfig):
 
 # what a checkpoint holds beyond its format, config and params, for a run to continue from it
 RESUME_STATE = ("iteration", "opt_state", "key", "obs", "envs", "elapsed_s")
-
-def save_checkpoint(path: Path, payload: dict) -> None:
-    """Atomically write ``payload`` (params, optimizer state, keys, env snapshots, ...)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp")
-    with open(tmp, "wb") as f:
-        pickle.dump(jax.device_get(payload), f, protocol=pickle.HIGHEST_PROTOCOL)
-    os.replace(tmp, path)
-
+CHECKPOINT_FORMAT = "stori-jax-ppo-1"
 
 def load_checkpoint(path: Path) -> dict:
     """The payload of a checkpoint written by :func:`train`; a ValueError saying why if
     ``path`` is not one."""
-    path = Path(path)
-    if not path.exists():
-        raise ValueError(f"checkpoint {path} does not exist")
+    return check_checkpoint(read_checkpoint(path, "stori-jax PPO"), path)
 
+
+def check_checkpoint(payload: dict, path: Path) -> dict:
+    """``payload`` (read from ``path``) if it is a PPO checkpoint; a ValueError saying why not."""
     def refuse(why: str):
         return ValueError(f"not a stori-jax PPO checkpoint: {path} ({why})")
 
-    if not path.is_file():
-        raise refuse("a directory; give the checkpoint.pkl in it" if path.is_dir()
-                     else "not a regular file")
-    try:
-        with open(path, "rb") as f:
-            payload = pickle.load(f)
-    except Exception as e:  # unpickling junk can raise almost anything
-        raise refuse(f"unreadable: {type(e).__name__}: {e}") from None
-    if not isinstance(payload, dict) or payload.get("format") != "stori-jax-ppo-1":
-        raise refuse("no format 'stori-jax-ppo-1' marker")
+    if payload["format"] != CHECKPOINT_FORMAT:
+        raise refuse(f"no format {CHECKPOINT_FORMAT!r} marker")
     missing = [k for k in ("config", "params") if k not in payload]
     if missing:
         raise refuse(f"lacks {missing}")
@@ -529,33 +515,7 @@ def load_checkpoint(path: Path) -> dict:
     return payload
 
 
-def _rewrite_csv(path: Path, fields, rows) -> None:
-    with open(path, "w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(fields)
-        writer.writerows(rows)
-
-
-def _append_csv(path: Path, rows) -> None:
-    with open(path, "a", newline="") as f:
-        csv.writer(f).writerows(rows)
-
-
-def _rows_upto(path: Path, fields, upto_step: int) -> list[list[str]]:
-    """The rows of a log CSV whose global_step is <= ``upto_step``."""
-    column = fields.index("global_step")
-    with open(path, newline="") as f:
-        rows = list(csv.reader(f))[1:]
-    return [r for r in rows if int(r[column]) <= upto_step]
-
-
 # -- training -------------------------------------------------------------------------------------
-
-def _recorded_parts(ckpt: dict) -> list:
-    """The checkpoint's software history (unrecorded software, None, in one from before it was
-    kept)."""
-    return list(ckpt.get("software_parts", [dict(from_iteration=0, software=None)]))
-
 
 def _checked_checkpoint(config: PPOConfig, ckpt_path: Path, stop_after: int | None) -> dict:
     """The checkpoint a resume continues: trained under ``config``, with all a run needs, and
@@ -575,52 +535,6 @@ def _checked_checkpoint(config: PPOConfig, ckpt_path: Path, stop_after: int | No
         raise ValueError(f"stop_after {stop_after} is before {ckpt_path}'s iteration "
                          f"{ckpt['iteration']}: a run cannot go back")
     return ckpt
-
-
-def _software_parts(ckpt: dict, start: int, made_with: dict, path: Path) -> list:
-    """The checkpoint's software history, with this part's software appended where it differs
-    from the last part's (a warning says so). A checkpoint written before the history was kept
-    starts it with unrecorded software (None)."""
-    parts = _recorded_parts(ckpt)
-    before = parts[-1]["software"]
-    if before == made_with:
-        return parts
-    if before is not None:
-        changed = [f"{name} {before.get(name)!r} -> {made_with[name]!r}"
-                   for name in ("python", "machine", "commit")
-                   if before.get(name) != made_with[name]]
-        changed += [f"{name} {version!r} -> {made_with['packages'][name]!r}"
-                    for name, version in before.get("packages", {}).items()
-                    if version != made_with["packages"].get(name)]
-        warnings.warn(f"resuming from {path}: it was trained so far with other software "
-                      f"({'; '.join(changed)}): from iteration {start} on, the run may not "
-                      "match an uninterrupted one bit for bit", stacklevel=3)
-    return parts + [dict(from_iteration=start, software=made_with)]
-
-
-def check_no_run_here(out: Path) -> None:
-    """A fresh run is not trained over another: one with a checkpoint (resume it instead), or
-    a finished one whose checkpoint is gone (:func:`check_no_finished_run`).  A run stopped
-    before its first checkpoint (no summary yet) is simply started again."""
-    if (out / "checkpoint.pkl").exists():
-        raise ValueError(f"{out} already holds a run: resume it (stori-jax train ppo ... "
-                         "--resume), or train into another directory (--out DIR)")
-    check_no_finished_run(out)
-
-
-def check_no_finished_run(out: Path, prefix: str = "",
-                          elsewhere: str = "stori-jax train ppo ... --out DIR") -> None:
-    """Refuse ``out`` if it holds a finished run (its summary or an evaluation) whose
-    checkpoint is gone (checkpoints are not committed): it cannot be continued, and a fresh
-    run there would start again over its files and leave the old evaluations beside it.
-    ``prefix`` and ``elsewhere`` (how to train into another directory) word it for a caller."""
-    finished = [path.name for path in [out / "summary.json", *sorted(out.glob("eval-*.json"))]
-                if path.exists()]
-    if finished and not (out / "checkpoint.pkl").exists():
-        raise ValueError(f"{prefix}{out} holds a finished run ({', '.join(finished)}) without "
-                         "its checkpoint.pkl (checkpoints are not committed): it cannot be "
-                         "continued, and a new run there would leave its evaluations beside "
-                         f"yours; train into another directory ({elsewhere})")
 
 
 def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool = True,
@@ -644,14 +558,14 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
     last = config.num_iterations if stop_after is None else min(stop_after,
                                                                 config.num_iterations)
     if not resume:
-        check_no_run_here(out)
+        check_no_run_here(out, "ppo")
     ckpt = _checked_checkpoint(config, ckpt_path, stop_after) if resume else None
     if ckpt is not None and ckpt["iteration"] == last:  # nothing to train
-        parts = _recorded_parts(ckpt)
+        parts = recorded_parts(ckpt)
         summary = _summary(config, last, ckpt["elapsed_s"], parts[-1]["software"], parts)
         if not (out / "summary.json").exists():  # an interruption came before it
-            _write_summary(out, summary)
-        return dict(summary, iterations_now=0)
+            write_summary(out, summary)
+        return dict(summary, iterations_now=0, agent_steps_now=0)
     envs = make_envs(config)
     try:
         network = make_network(config, envs[0].num_actions)
@@ -662,12 +576,12 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
         if ckpt is not None:
             params, opt_state = ckpt["params"], ckpt["opt_state"]
             key, start, obs = ckpt["key"], ckpt["iteration"], list(ckpt["obs"])
-            software_parts = _software_parts(ckpt, start, made_with, ckpt_path)
+            parts = software_parts(ckpt, start, made_with, ckpt_path)
             for env, snap in zip(envs, ckpt["envs"]):
                 env.restore(snap)
             step = start * config.batch_size
             for path, fields in ((log_path, LOG_FIELDS), (ep_path, EPISODE_FIELDS)):
-                _rewrite_csv(path, fields, _rows_upto(path, fields, step))
+                rewrite_csv(path, fields, rows_upto(path, fields, step))
             elapsed = ckpt["elapsed_s"]
         else:
             key = agent_key(config.seed)  # the env seeds 2*seed, 2*seed+1 draw their own chains
@@ -676,10 +590,10 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
             params = network.init(init_key, obs[0])
             opt_state = optimizer.init(params)
             start, elapsed = 0, 0.0
-            software_parts = [dict(from_iteration=0, software=made_with)]
+            parts = [dict(from_iteration=0, software=made_with)]
             (out / "config.json").write_text(json.dumps(dataclasses.asdict(config), indent=1))
-            _rewrite_csv(log_path, LOG_FIELDS, [])
-            _rewrite_csv(ep_path, EPISODE_FIELDS, [])
+            rewrite_csv(log_path, LOG_FIELDS, [])
+            rewrite_csv(ep_path, EPISODE_FIELDS, [])
         bar = tqdm(total=config.num_iterations * config.batch_size, initial=start
                    * config.batch_size, unit="step", disable=not progress,
                    desc=f"ppo {config.game} {config.preset} seed {config.seed}")
@@ -709,30 +623,25 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
                        lr=lr, sps=step / elapsed, rollout_sps=config.batch_size / (t1 - t0),
                        update_s=t2 - t1, **{k: float(v) for k, v in metrics.items()
                                             if k in LOG_FIELDS})
-            _append_csv(log_path, [[row[f] for f in LOG_FIELDS]])
-            _append_csv(ep_path, episodes)
+            append_csv(log_path, [[row[f] for f in LOG_FIELDS]])
+            append_csv(ep_path, episodes)
             bar.update(config.batch_size)
             bar.set_postfix(ret=f"{np.mean(recent):.1f}" if recent else "-",
                             sps=f"{step / elapsed:.0f}")
             if (iteration + 1) % config.checkpoint_every == 0 or iteration + 1 == last:
                 save_checkpoint(ckpt_path, dict(
-                    format="stori-jax-ppo-1", config=dataclasses.asdict(config),
+                    format=CHECKPOINT_FORMAT, config=dataclasses.asdict(config),
                     iteration=iteration + 1, params=params, opt_state=opt_state, key=key,
                     obs=obs, envs=[env.snapshot() for env in envs], elapsed_s=elapsed,
-                    software_parts=software_parts))
+                    software_parts=parts))
         bar.close()
     finally:
         for env in envs:
             env.close()
-    summary = _summary(config, last, elapsed, made_with, software_parts)
-    _write_summary(out, summary)
-    return dict(summary, iterations_now=last - start)
-
-
-def _write_summary(out: Path, summary: dict) -> None:
-    """``out``/summary.json, once the run has finished (its table and evaluation read it)."""
-    if summary["finished"]:
-        (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    summary = _summary(config, last, elapsed, made_with, parts)
+    write_summary(out, summary)
+    return dict(summary, iterations_now=last - start,
+                agent_steps_now=(last - start) * config.batch_size)
 
 
 def _summary(config: PPOConfig, iterations: int, elapsed: float, made_with: dict,
@@ -813,3 +722,10 @@ def policy_of(ckpt: dict, mode: str = "sampled"):
         return jax.random.categorical(key, logits).astype(jnp.int32)
 
     return config, policy
+
+
+AGENT = Agent(name="ppo", title="PPO", config_class=PPOConfig,
+              checkpoint_format=CHECKPOINT_FORMAT, train=train,
+              check_checkpoint=check_checkpoint, policy_of=policy_of,
+              training_progress=training_progress, train_env_seeds=train_env_seeds,
+              steps_per_iteration=lambda config: config.batch_size)

@@ -1,6 +1,6 @@
 """The stori-jax command line: run a preset with a random policy, suite over every preset,
-show / record pictures of a preset, list what exists; train a PPO baseline, eval it (or the
-random policy) by the paper's protocol, table the results."""
+show / record pictures of a preset, list what exists; and the commands of installed plugins
+(:mod:`stori_jax.plugins`; the baselines add train, eval, table)."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from pathlib import Path
 from stori_jax.checks import MAX_SEED, check_int
 from stori_jax.config import GRANULARITIES
 from stori_jax.plan import OBS_KINDS
+from stori_jax.plugins import add_commands
 from stori_jax.visual import AFTER_SWITCH, SHEET_STEPS, episode_step_cap
 
 
@@ -154,19 +155,18 @@ def _cmd_suite(args) -> int:
         check_out("--out (default)", args.out, directory=True)
     else:
         check_out("--out", args.out, directory=True)
-    games, seed = args.games, 0 if args.seed is None else args.seed
+    games, seed, trained = args.games, 0 if args.seed is None else args.seed, None
     if args.checkpoint is not None:  # a checkpoint plays its own game, on eval's seed
-        from baselines.evaluate import EVAL_SEED_OFFSET
-        from baselines.ppo import load_checkpoint
+        from stori_jax.plugins import trained_policy
 
-        trained = load_checkpoint(args.checkpoint)["config"]
-        games = games or [trained["game"]]
+        trained = trained_policy(args.checkpoint)
+        games = games or [trained.game]
         if args.seed is None:
-            seed = trained["seed"] + EVAL_SEED_OFFSET
+            seed = trained.eval_seed
     out = run_suite(selected_presets(games, args.presets), episodes=args.episodes,
                     num_envs=args.num_envs, max_steps=args.max_steps, seed=seed,
                     out=args.out, gallery=not args.no_gallery, progress=not args.quiet,
-                    checkpoint=args.checkpoint)
+                    trained=trained, checkpoint=args.checkpoint)
     print((out / "table.md").read_text())
     print(f"wrote {out}/table.md, {out}/results.json" + ("" if args.no_gallery
                                                          else f" and {out}/gallery/"))
@@ -256,7 +256,6 @@ def _cmd_record(args) -> int:
     return 0
 
 
-BASELINE_COMMANDS = ("train", "eval", "table")
 INTERRUPTED = 130  # the exit code of a command stopped by Ctrl-C, as a shell reports SIGINT
 GAME_HELP = "Breakout, Boxing, Gopher, BankHeist (or any ale-py game, without a preset)"
 PRESET_HELP = "paper preset, e.g. 2.1 or 3.2A (`stori-jax list` shows them)"
@@ -283,8 +282,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "preset's, frame)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
 
-    suite = sub.add_parser("suite", help="every paper preset with a random agent (or a PPO "
-                                         "checkpoint's): table, JSON, gallery")
+    suite = sub.add_parser("suite", help="every paper preset with a random agent (or a "
+                                         "trained checkpoint's): table, JSON, gallery")
     suite.add_argument("--games", nargs="+", default=None, help="a subset of the games")
     suite.add_argument("--presets", nargs="+", default=None, help="a subset of preset names")
     suite.add_argument("--episodes", type=int, default=8, help="episodes per preset (default 8)")
@@ -296,7 +295,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="environment seed (default 0; with --checkpoint the eval seed "
                             "`stori-jax eval` gives it: never one of its training envs' seeds)")
     suite.add_argument("--checkpoint", type=Path, default=None,
-                       help="play a trained PPO checkpoint's policy (sampled) instead of the "
+                       help="play a trained agent's checkpoint's policy (sampled) instead of the "
                             "random one; it plays its own game's presets (the gallery shows "
                             "random play)")
     suite.add_argument("--out", type=Path, default=None,
@@ -326,9 +325,7 @@ def build_parser() -> argparse.ArgumentParser:
         else:
             p.add_argument("--max-steps", type=int, default=1000,
                            help="agent steps at most, if the episode is longer (default 1000)")
-    from baselines.commands import add_parsers
-
-    add_parsers(sub)  # train, eval, table
+    add_commands(sub)  # the plugins' (the baselines: train, eval, table)
     return parser
 
 
@@ -344,10 +341,8 @@ def main(argv: list[str] | None = None) -> int:
             return _cmd_show(args)
         if args.command == "record":
             return _cmd_record(args)
-        if args.command in BASELINE_COMMANDS:
-            from baselines.commands import COMMANDS
-
-            return COMMANDS[args.command](args)
+        if hasattr(args, "handler"):  # a plugin's command
+            return args.handler(args)
         check_int("--steps", args.steps, 1)
         check_int("--seed", args.seed, 0, MAX_SEED)
         return _cmd_run(args)

@@ -208,11 +208,12 @@ def default_out() -> Path:
 
 def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: int,
               out: Path | None, gallery: bool, progress: bool = True,
-              checkpoint: Path | None = None) -> Path:
-    """Run ``presets`` [(game, name)] with the random policy, or the PPO ``checkpoint``'s
-    (which plays its own game only: every preset must be of that game, and ``seed`` must not
-    be one of its training envs' seeds).  The gallery's contact sheets show what each preset
-    perturbs, under random play either way."""
+              trained=None, checkpoint: Path | None = None) -> Path:
+    """Run ``presets`` [(game, name)] with the random policy, or a ``trained``
+    :class:`stori_jax.plugins.TrainedPolicy` (loaded from ``checkpoint`` when only that is
+    given), which plays its own game only: every preset must be of that game, and ``seed``
+    must not be one of its training envs' seeds.  The gallery's contact sheets show what each
+    preset perturbs, under random play either way."""
     from tqdm import tqdm
 
     import stori_jax
@@ -221,19 +222,23 @@ def run_suite(presets, *, episodes: int, num_envs: int, max_steps: int, seed: in
     made_with = software()  # when the run starts
     out = Path(out) if out else default_out()
     policy = agent = None
-    if checkpoint is not None:
-        from baselines.evaluate import EVAL_SEED_OFFSET, check_eval_seed
-        from baselines.ppo import load_policy
+    if trained is None and checkpoint is not None:
+        from stori_jax.plugins import trained_policy
 
-        config, policy = load_policy(checkpoint, "sampled")
-        trained_on = config.game
-        others = sorted({g for g, _ in presets if g != trained_on})
+        trained = trained_policy(checkpoint)
+    if trained is not None:
+        policy = trained.act
+        others = sorted({g for g, _ in presets if g != trained.game})
         if others:
-            raise ValueError(f"--checkpoint {checkpoint} plays {trained_on} only; choose its "
-                             f"presets with --games {trained_on} (asked for {others})")
-        check_eval_seed(config.seed, seed, "choose another --seed (by default the training "
-                        f"seed + {EVAL_SEED_OFFSET})")
-        agent = str(checkpoint)
+            raise ValueError(f"--checkpoint {checkpoint} plays {trained.game} only; choose its "
+                             f"presets with --games {trained.game} (asked for {others})")
+        if seed in trained.train_env_seeds:
+            raise ValueError(f"eval seed {seed} is one of the training envs' seeds "
+                             f"{list(trained.train_env_seeds)} (training seed {trained.seed}): "
+                             "the evaluation would replay training's episodes; choose another "
+                             f"--seed (by default the training seed + "
+                             f"{trained.eval_seed - trained.seed})")
+        agent = str(checkpoint) if checkpoint is not None else trained.agent
     rows, written = [], [out / "results.json", out / "table.md"]
     # the sheets wait in a hidden folder until the run has finished: an interrupted run leaves
     # the earlier run's gallery, table and JSON as they were, not a mix of two runs (and an

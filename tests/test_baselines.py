@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 import stori_jax
-from baselines import ppo
+from baselines import ppo, runs
 from baselines.evaluate import evaluate, write_result
 from baselines.table import (PAPER_RESULTS, STD_OVER_SEEDS, aggregate, build_table, learning_curves,
                              load_evaluations, markdown, smoothed)
@@ -512,7 +512,7 @@ def test_a_resumed_run_records_each_parts_software_and_warns_when_it_changed(
     # a checkpoint from before the history was kept: its parts' software is unrecorded
     ckpt = read_checkpoint(full)
     del ckpt["software_parts"]
-    assert ppo._software_parts(ckpt, 3, later, full / "checkpoint.pkl") == [
+    assert runs.software_parts(ckpt, 3, later, full / "checkpoint.pkl") == [
         dict(from_iteration=0, software=None), dict(from_iteration=3, software=later)]
 
 
@@ -1731,9 +1731,9 @@ def test_cli_train_says_where_a_resumed_run_started_and_leaves_no_empty_folder(
     all; a Ctrl-C before anything was written left the new run folder behind, empty."""
     def resumed(config, out, resume, progress):
         return dict(iterations_now=2, agent_steps=3 * config.batch_size, train_seconds=9.0,
-                    train_sps=1.0)
+                    train_sps=1.0, agent_steps_now=2 * config.batch_size)
 
-    monkeypatch.setattr(ppo, "train", resumed)
+    monkeypatch.setattr(ppo, "AGENT", dataclasses.replace(ppo.AGENT, train=resumed))
     args = ["train", "ppo", "--game", "Breakout", "--set", "num_envs=2", "--set",
             "num_steps=8", "--steps", "48", "--quiet"]
     (tmp_path / "run" / "checkpoint.pkl").parent.mkdir()
@@ -1746,7 +1746,7 @@ def test_cli_train_says_where_a_resumed_run_started_and_leaves_no_empty_folder(
         out.mkdir(parents=True)
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(ppo, "train", interrupted)
+    monkeypatch.setattr(ppo, "AGENT", dataclasses.replace(ppo.AGENT, train=interrupted))
     assert main([*args, "--out", str(tmp_path / "new" / "run")]) == 130  # Ctrl-C's exit code
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
 
@@ -1761,7 +1761,7 @@ def test_cli_train_evaluates_the_sampled_policy_of_its_checkpoint(tmp_path, monk
 
     def train(config, out, resume, progress):
         return dict(iterations_now=1, agent_steps=config.total_steps, train_seconds=1.0,
-                    train_sps=1.0)
+                    train_sps=1.0, agent_steps_now=config.total_steps)
 
     def evaluate(game, preset, **kwargs):
         calls.append(dict(kwargs, game=game, preset=preset))
@@ -1769,7 +1769,7 @@ def test_cli_train_evaluates_the_sampled_policy_of_its_checkpoint(tmp_path, monk
                     mean_return=1.0, std_return=0.5, truncated=0, episodes=kwargs["episodes"],
                     eval_seed=10_004)
 
-    monkeypatch.setattr(ppo, "train", train)
+    monkeypatch.setattr(ppo, "AGENT", dataclasses.replace(ppo.AGENT, train=train))
     monkeypatch.setattr(baselines.evaluate, "evaluate", evaluate)
     assert main(["train", "ppo", "--game", "boxing", "--preset", "3.2b", "--seed", "4",
                  "--steps", "64", "--eval-episodes", "3", "--out", str(tmp_path),
@@ -1783,13 +1783,13 @@ def test_cli_train_evaluates_the_sampled_policy_of_its_checkpoint(tmp_path, monk
     (tmp_path / "checkpoint.pkl").write_bytes(b"")  # a run to --resume
     again = ["train", "ppo", "--game", "boxing", "--preset", "3.2b", "--seed", "4", "--steps",
              "64", "--eval-episodes", "2", "--out", str(tmp_path), "--resume", "--quiet"]
-    monkeypatch.setattr(ppo, "train", lambda *a, **k: pytest.fail("trained before refusing"))
+    monkeypatch.setattr(ppo, "AGENT", dataclasses.replace(ppo.AGENT, train=lambda *a, **k: pytest.fail("trained before refusing")))
     assert main(again) == 2
     assert (f"{tmp_path / 'eval-sampled.json'} already holds an evaluation: pass --force to "
             "replace it, or train without --eval-episodes, then run stori-jax eval --checkpoint "
             f"{tmp_path}/checkpoint.pkl --out DIR") in capsys.readouterr().err
     assert json.loads((tmp_path / "eval-sampled.json").read_text())["episodes"] == 3
-    monkeypatch.setattr(ppo, "train", train)
+    monkeypatch.setattr(ppo, "AGENT", dataclasses.replace(ppo.AGENT, train=train))
     assert main(again + ["--force"]) == 0
     assert json.loads((tmp_path / "eval-sampled.json").read_text())["episodes"] == 2
     assert main(again[:-6] + ["--out", str(tmp_path), "--resume", "--force"]) == 2
@@ -1886,14 +1886,14 @@ def test_cli_default_run_folders_are_filed_under_the_seed(tmp_path, monkeypatch)
     def train(config, out, resume, progress):
         trained_into.append(out)
         return dict(iterations_now=1, agent_steps=config.total_steps, train_seconds=1.0,
-                    train_sps=1.0)
+                    train_sps=1.0, agent_steps_now=config.total_steps)
 
     def evaluate(game, preset, **kwargs):
         return dict(game=game, preset=preset, agent="random", policy=kwargs["policy"],
                     train_seed=kwargs["seed"], mean_return=1.0, std_return=0.5, truncated=0,
                     episodes=kwargs["episodes"], eval_seed=10_007)
 
-    monkeypatch.setattr(ppo, "train", train)
+    monkeypatch.setattr(ppo, "AGENT", dataclasses.replace(ppo.AGENT, train=train))
     monkeypatch.setattr(baselines.evaluate, "evaluate", evaluate)
     assert main(["train", "ppo", "--game", "Breakout", "--seed", "7", "--set", "num_envs=2",
                  "--set", "num_steps=8", "--steps", "16", "--quiet"]) == 0
@@ -1909,13 +1909,13 @@ def test_cli_train_says_when_steps_round_up_to_whole_iterations(tmp_path, monkey
     def train(config, out, resume, progress):
         return dict(iterations_now=config.num_iterations,
                     agent_steps=config.num_iterations * config.batch_size, train_seconds=1.0,
-                    train_sps=1.0)
+                    train_sps=1.0, agent_steps_now=config.num_iterations * config.batch_size)
 
-    monkeypatch.setattr(ppo, "train", train)
+    monkeypatch.setattr(ppo, "AGENT", dataclasses.replace(ppo.AGENT, train=train))
     args = ["train", "ppo", "--game", "Breakout", "--set", "num_envs=2", "--set", "num_steps=8",
             "--quiet"]
     assert main([*args, "--steps", "50", "--out", str(tmp_path / "a")]) == 0
-    assert ("stori-jax: --steps 50 rounds up to 64 agent steps, whole iterations of num_envs x "
-            "num_steps = 16") in capsys.readouterr().err
+    assert ("stori-jax: --steps 50 rounds up to 64 agent steps, whole iterations of 16 agent "
+            "steps") in capsys.readouterr().err
     assert main([*args, "--steps", "48", "--out", str(tmp_path / "b")]) == 0
     assert "rounds up" not in capsys.readouterr().err

@@ -6,7 +6,7 @@ import pickle
 
 import pytest
 
-from baselines.ppo import load_checkpoint
+from baselines.agents import load_checkpoint
 from stori_jax.cli import main
 
 EVAL = dict(game="Breakout", preset="3.1", agent="random", policy="random", train_seed=0,
@@ -92,18 +92,19 @@ def test_the_suites_default_out_is_checked_as_a_given_one(files, capsys, monkeyp
 
 
 @pytest.mark.parametrize("name, why", [
-    ("empty.pkl", "unreadable: EOFError"),
-    ("bad.json", "unreadable: UnpicklingError"),
-    ("text.pkl", "unreadable: ValueError"),
-    ("list.pkl", "no format 'stori-jax-ppo-1' marker"),
-    ("nocfg.pkl", "lacks ['config']"),
-    ("badcfg.pkl", "bad config: gamma must be in [0, 1]"),
-    ("adir", "a directory; give the checkpoint.pkl in it"),
+    ("empty.pkl", "not a stori-jax checkpoint: D/empty.pkl (unreadable: EOFError"),
+    ("bad.json", "not a stori-jax checkpoint: D/bad.json (unreadable: UnpicklingError"),
+    ("text.pkl", "not a stori-jax checkpoint: D/text.pkl (unreadable: ValueError"),
+    ("list.pkl", "not a stori-jax checkpoint: D/list.pkl (no format marker"),
+    ("nocfg.pkl", "not a stori-jax PPO checkpoint: D/nocfg.pkl (lacks ['config']"),
+    ("badcfg.pkl", "not a stori-jax PPO checkpoint: D/badcfg.pkl (bad config: gamma must be "
+                   "in [0, 1]"),
+    ("adir", "not a stori-jax checkpoint: D/adir (a directory; give the checkpoint.pkl in it"),
 ])
 def test_corrupt_checkpoints_say_why(name, why, files, capsys):
     err = run_main(["eval", "--checkpoint", f"D/{name}"], files, capsys)
-    assert f"not a stori-jax PPO checkpoint: D/{name} ({why}" in err
-    with pytest.raises(ValueError, match="not a stori-jax PPO checkpoint"):
+    assert why in err
+    with pytest.raises(ValueError, match="not a stori-jax"):
         load_checkpoint(files / name)
 
 

@@ -1,0 +1,130 @@
+"""A training run's folder, the same for every agent: checkpoint.pkl (atomic), config.json,
+log CSVs cut back to a checkpoint on resume, summary.json, and the software each part of a
+resumed run was trained with."""
+
+from __future__ import annotations
+
+import csv
+import os
+import pickle
+import warnings
+from pathlib import Path
+
+import jax
+
+
+def save_checkpoint(path: Path, payload: dict) -> None:
+    """Atomically write ``payload`` (params, optimizer state, keys, env snapshots, ...)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    with open(tmp, "wb") as f:
+        pickle.dump(jax.device_get(payload), f, protocol=pickle.HIGHEST_PROTOCOL)
+    os.replace(tmp, path)
+
+
+def read_checkpoint(path: Path, what: str = "stori-jax") -> dict:
+    """The unpickled payload of a checkpoint file (a dict with a ``format``).
+
+    Raises:
+        ValueError: no such file, or it is not a checkpoint (``what`` names the kind in the
+            message)."""
+    path = Path(path)
+    if not path.exists():
+        raise ValueError(f"checkpoint {path} does not exist")
+
+    def refuse(why: str):
+        return ValueError(f"not a {what} checkpoint: {path} ({why})")
+
+    if not path.is_file():
+        raise refuse("a directory; give the checkpoint.pkl in it" if path.is_dir()
+                     else "not a regular file")
+    try:
+        with open(path, "rb") as f:
+            payload = pickle.load(f)
+    except Exception as e:  # unpickling junk can raise almost anything
+        raise refuse(f"unreadable: {type(e).__name__}: {e}") from None
+    if not isinstance(payload, dict) or not isinstance(payload.get("format"), str):
+        raise refuse("no format marker")
+    return payload
+
+
+def rewrite_csv(path: Path, fields, rows) -> None:
+    with open(path, "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(fields)
+        writer.writerows(rows)
+
+
+def append_csv(path: Path, rows) -> None:
+    with open(path, "a", newline="") as f:
+        csv.writer(f).writerows(rows)
+
+
+def rows_upto(path: Path, fields, upto_step: int) -> list[list[str]]:
+    """The rows of a log CSV whose global_step is <= ``upto_step``."""
+    column = fields.index("global_step")
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))[1:]
+    return [r for r in rows if int(r[column]) <= upto_step]
+
+
+def recorded_parts(ckpt: dict) -> list:
+    """The checkpoint's software history (unrecorded software, None, in one from before it was
+    kept)."""
+    return list(ckpt.get("software_parts", [dict(from_iteration=0, software=None)]))
+
+
+def software_parts(ckpt: dict, start: int, made_with: dict, path: Path) -> list:
+    """The checkpoint's software history, with this part's software appended where it differs
+    from the last part's (a warning says so). A checkpoint written before the history was kept
+    starts it with unrecorded software (None)."""
+    parts = recorded_parts(ckpt)
+    before = parts[-1]["software"]
+    if before == made_with:
+        return parts
+    if before is not None:
+        changed = [f"{name} {before.get(name)!r} -> {made_with[name]!r}"
+                   for name in ("python", "machine", "commit")
+                   if before.get(name) != made_with[name]]
+        changed += [f"{name} {version!r} -> {made_with['packages'][name]!r}"
+                    for name, version in before.get("packages", {}).items()
+                    if version != made_with["packages"].get(name)]
+        warnings.warn(f"resuming from {path}: it was trained so far with other software "
+                      f"({'; '.join(changed)}): from iteration {start} on, the run may not "
+                      "match an uninterrupted one bit for bit", stacklevel=3)
+    return parts + [dict(from_iteration=start, software=made_with)]
+
+
+def check_no_run_here(out: Path, agent: str = "AGENT") -> None:
+    """A fresh run is not trained over another: one with a checkpoint (resume it instead), or
+    a finished one whose checkpoint is gone (:func:`check_no_finished_run`).  A run stopped
+    before its first checkpoint (no summary yet) is simply started again."""
+    if (Path(out) / "checkpoint.pkl").exists():
+        raise ValueError(f"{out} already holds a run: resume it (stori-jax train {agent} ... "
+                         "--resume), or train into another directory (--out DIR)")
+    check_no_finished_run(out, elsewhere=f"stori-jax train {agent} ... --out DIR")
+
+
+def check_no_finished_run(out: Path, prefix: str = "",
+                          elsewhere: str = "stori-jax train AGENT ... --out DIR") -> None:
+    """Refuse ``out`` if it holds a finished run (its summary or an evaluation) whose
+    checkpoint is gone (checkpoints are not committed): it cannot be continued, and a fresh
+    run there would start again over its files and leave the old evaluations beside it.
+    ``prefix`` and ``elsewhere`` (how to train into another directory) word it for a caller."""
+    out = Path(out)
+    finished = [path.name for path in [out / "summary.json", *sorted(out.glob("eval-*.json"))]
+                if path.exists()]
+    if finished and not (out / "checkpoint.pkl").exists():
+        raise ValueError(f"{prefix}{out} holds a finished run ({', '.join(finished)}) without "
+                         "its checkpoint.pkl (checkpoints are not committed): it cannot be "
+                         "continued, and a new run there would leave its evaluations beside "
+                         f"yours; train into another directory ({elsewhere})")
+
+
+def write_summary(out: Path, summary: dict) -> None:
+    """``out``/summary.json, once the run has finished (its table and evaluation read it)."""
+    import json
+
+    if summary["finished"]:
+        (Path(out) / "summary.json").write_text(json.dumps(summary, indent=1))
