@@ -20,21 +20,166 @@ the game and the preset.  A config of your own (type 0 included) goes through th
 
     env = StoriGymEnv("Breakout", config=stori_jax.Config(ram_observation=True), obs="ram")
     envs = StoriVectorEnv(8, "Breakout", config=my_config)
+
+ale-py's style (docs/drop-in.md): ``stori_ALE/<Game>-<preset>-v5`` (ale-py's ``ALE/<Game>-v5``:
+RGB frames, frameskip 4) and ``stori_ALE/<Game>NoFrameskip-<preset>-v4`` (``<Game>NoFrameskip-v4``:
+frameskip 1, for wrapper stacks that skip frames themselves) take ale-py's ``AtariEnv``
+keywords, and every env here takes them too: ``obs_type`` (``rgb``, ``grayscale`` with ALE's own
+luminance, ``ram``), ``frameskip``, ``repeat_action_probability`` (ALE's sticky actions: STORI's
+type 1 ``ActionNoise(p, sticky=True)`` per emulator frame), ``max_num_frames_per_episode`` and
+``render_mode="rgb_array"``; ``full_action_space``, ``mode``, ``difficulty``, ``continuous`` and
+``sound_obs`` only at their defaults (a clear error otherwise).  ``env.unwrapped.ale`` stands in
+for ale-py's ``ALEInterface`` (``lives()``, ``getScreenRGB``, ``getScreenGrayscale``, ``getRAM``,
+...), with ``get_action_meanings()`` beside it, so gymnasium's ``AtariPreprocessing`` and
+CleanRL's and SB3's Atari wrappers run unchanged.  ``gymnasium.make("stori_jax:stori_ALE/...")``
+imports stori_jax itself (gymnasium's ``module:id``), so a script's env id is the one change.
 """
 
 from __future__ import annotations
+
+import functools
 
 import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 
-from stori_jax.checks import MAX_SEED, check_int
+from stori_jax.checks import MAX_SEED, check_int, check_probability
 
 NAMESPACE = "stori_jax"
+ALE_NAMESPACE = "stori_ALE"  # ale-py's style (gymnasium ids hold one namespace: no stori_jax/ALE/)
 
 
 def env_id(game: str, preset: str) -> str:
     return f"{NAMESPACE}/{game}-{preset}-v0"
+
+
+def ale_env_id(game: str, preset: str, frameskip: int = 4) -> str:
+    """ale-py's style: ``stori_ALE/<Game>-<preset>-v5`` (frameskip 4), or
+    ``stori_ALE/<Game>NoFrameskip-<preset>-v4`` (frameskip 1), as ale-py's ``ALE/<Game>-v5`` and
+    ``<Game>NoFrameskip-v4``.  (Not ``stori_jax/<Game>-<preset>-v5``: gymnasium would call the
+    -v0 ids out of date.)"""
+    if frameskip == 1:
+        return f"{ALE_NAMESPACE}/{game}NoFrameskip-{preset}-v4"
+    return f"{ALE_NAMESPACE}/{game}-{preset}-v5"
+
+
+# -- ale-py's AtariEnv keywords -------------------------------------------------------------------
+
+SCREEN_DIMS = (210, 160)
+RENDER_MODES = ("rgb_array",)
+OBS_TYPES = ("rgb", "grayscale", "ram")
+# ale-py's keyword -> make's keyword for the same setting
+ALE_TWINS = {"obs_type": "obs", "frameskip": "frame_skip",
+             "max_num_frames_per_episode": "max_episode_frames"}
+# what ale-py's registered ids fix (ale_py/registration.py), but sticky actions (see below)
+ALE_ID_DEFAULTS = dict(obs_type="rgb", repeat_action_probability=0.0, full_action_space=False,
+                       max_num_frames_per_episode=108_000)
+NO_CAP = 2**31 - 1  # max_num_frames_per_episode None or 0 (ALE: no cap), in frames
+
+
+def ale_grayscale(rgb) -> np.ndarray:
+    """ALE's ``getScreenGrayscale`` of RGB screens (..., 3) -> (...): its palette's luminance,
+    ``round(0.2989 R + 0.5870 G + 0.1140 B)`` in double precision, rounding half up (ALE's
+    ColourPalette; stori_jax's atari84 uses integer ITU-R 601 weights instead)."""
+    rgb = np.asarray(rgb)
+    y = rgb[..., 0] * 0.2989 + rgb[..., 1] * 0.5870 + rgb[..., 2] * 0.1140  # float64
+    whole = np.floor(y)
+    return (whole + (y - whole >= 0.5)).astype(np.uint8)
+
+
+@functools.lru_cache(maxsize=None)
+def action_meanings(game: str) -> tuple[str, ...]:
+    """ale-py's ``get_action_meanings()`` of ``game``'s minimal action set (the actions a
+    stori_jax env takes, in order)."""
+    from ale_py import Action, ALEInterface, LoggerMode, roms
+
+    from stori_jax.games import get_game
+
+    ALEInterface.setLoggerMode(LoggerMode.Error)
+    ale = ALEInterface()
+    ale.loadROM(roms.get_rom_path(get_game(game).rom_id))
+    names = {value: name for name, value in Action.__members__.items()}
+    return tuple(names[a] for a in ale.getMinimalActionSet())
+
+
+def sticky_actions_config(game: str, preset: str | None, config, prob: float,
+                          granularity: str | None = None):
+    """The Config of ``preset`` (or ``config``) with ALE's sticky actions at ``prob``
+    (ale-py's and envpool's ``repeat_action_probability``): STORI's type 1
+    ``ActionNoise(prob, sticky=True)`` at ``frame`` granularity, which repeats the previous
+    executed action on each emulator frame with probability ``prob`` (NOOP after a reset), as
+    ALE does.  A config that already corrupts actions, or draws per agent step, is refused:
+    two action channels, or sticky actions per step, would not be ALE's."""
+    import stori_jax
+    from stori_jax.env import resolve_config
+
+    cfg = resolve_config(game, preset, config)
+    what = (f"repeat_action_probability={prob!r} (ALE's sticky actions, STORI's type 1 "
+            "ActionNoise(p, sticky=True))")
+    noise = [part for _, part, _ in cfg.components() if isinstance(part, stori_jax.ActionNoise)]
+    if noise:
+        raise ValueError(f"{what}: this {'preset' if preset else 'config'} already corrupts "
+                         f"actions ({cfg.describe()}): the env's action noise is STORI's type 1; "
+                         "leave repeat_action_probability 0, or pass a Config with the action "
+                         "noise you want")
+    if (granularity or cfg.granularity) != "frame":
+        raise ValueError(f"{what}: ALE repeats actions per emulator frame, and this env draws "
+                         "per agent step (granularity 'step'); use granularity 'frame'")
+    return cfg.replace(action_noise=stori_jax.ActionNoise(prob, sticky=True))
+
+
+def take_ale_keywords(kwargs: dict, ale_style: bool, id_name: str | None = None) -> dict:
+    """Replace ale-py's ``AtariEnv`` keywords in ``kwargs`` (make's keywords) by make's own, in
+    place; returns what the adapter does itself: ``obs_type`` (None: make's ``obs``),
+    ``render_mode`` and ``repeat_action_probability``.  ``ale_style``: an id in ale-py's
+    style, which takes ale-py's names only."""
+    for ale_name, make_name in ALE_TWINS.items():
+        if make_name in kwargs and (ale_style or ale_name in kwargs):
+            where = f"the ale-py-style id {id_name}" if ale_style else "this env"
+            raise ValueError(
+                f"{make_name} and ale-py's {ale_name} name the same setting of {where}: pass "
+                f"{ale_name} only" + (f" (stori_jax's own {make_name} is the -v0 id's)"
+                                      if ale_style else f" or {make_name} only"))
+    out = {"obs_type": None, "render_mode": None, "repeat_action_probability": 0.0}
+    if "obs_type" in kwargs:
+        obs_type = kwargs.pop("obs_type")
+        if not isinstance(obs_type, str) or obs_type not in OBS_TYPES:
+            raise ValueError(f"obs_type must be one of {list(OBS_TYPES)} (ale-py's), got "
+                             f"{obs_type!r}")
+        kwargs["obs"] = "ram" if obs_type == "ram" else "raw"
+        out["obs_type"] = obs_type
+    if "frameskip" in kwargs:
+        frameskip = kwargs.pop("frameskip")
+        if isinstance(frameskip, tuple):
+            raise ValueError(f"frameskip: ale-py's stochastic frame skip {frameskip!r} is not "
+                             "supported (STORI steps a fixed number of frames); pass an int")
+        kwargs["frame_skip"] = check_int("frameskip", frameskip, 1)
+    if "max_num_frames_per_episode" in kwargs:
+        frames = kwargs.pop("max_num_frames_per_episode")
+        kwargs["max_episode_frames"] = NO_CAP if frames is None or frames == 0 else             check_int("max_num_frames_per_episode", frames, 1, NO_CAP)
+    out["repeat_action_probability"] = check_probability(
+        "repeat_action_probability", kwargs.pop("repeat_action_probability", 0.0))
+    for name, why in (("full_action_space", "stori_jax plays the game's minimal action set "
+                                            "(ale-py's default; the paper's)"),
+                      ("continuous", "STORI's actions are discrete"),
+                      ("sound_obs", "the workers do not record sound")):
+        value = kwargs.pop(name, False)
+        if value is not False:
+            raise ValueError(f"{name}={value!r} is not supported: {why}; leave it False")
+    for name in ("mode", "difficulty"):
+        value = kwargs.pop(name, None)
+        if value is not None:
+            raise ValueError(f"{name}={value!r} is not supported: STORI plays each game's default "
+                             f"{name} (the presets are defined on it); leave it None")
+    # ale-py uses it with continuous=True only, which is refused above
+    kwargs.pop("continuous_action_threshold", None)
+    render_mode = kwargs.pop("render_mode", None)
+    if render_mode is not None and render_mode not in RENDER_MODES:
+        raise ValueError(f"render_mode must be None or one of {list(RENDER_MODES)}, got "
+                         f"{render_mode!r} (for a window, wrap the env in gymnasium's "
+                         "HumanRendering; `stori-jax record` writes GIFs)")
+    out["render_mode"] = render_mode
+    return out
 
 
 def _numpy(x) -> np.ndarray:
@@ -66,7 +211,9 @@ def _first_env_info(info: dict) -> dict:
     """The single env's info: env 0's entry of every batched leaf (``labels`` included)."""
     import jax
 
-    return jax.tree.map(lambda v: _numpy(v[0]), info)
+    # one transfer of the whole tree, then numpy indexing: indexing each JAX leaf was a JAX
+    # dispatch per key (~60 of them), three quarters of a single env's step
+    return jax.tree.map(lambda v: np.array(v[0]), jax.device_get(info))
 
 
 def _names(game, preset, registered: tuple[str, str]) -> bool:
@@ -96,25 +243,50 @@ class _Owner:
         registered = make_kwargs.pop("registered_as", None)
         if registered is not None:  # a spec saved as JSON or YAML gives it back as a list
             registered = tuple(registered)
+        ale_style = make_kwargs.pop("ale_style", False)
+        if ale_style not in (False, True):
+            raise ValueError(f"ale_style must be True or False, got {ale_style!r}")
+        id_name = None
+        if registered is not None:
+            id_name = (ale_env_id(*registered, make_kwargs.get("frameskip", 4)) if ale_style
+                       else env_id(*registered))
         if registered is not None and "config" in make_kwargs:
-            raise ValueError(f"config: the id {env_id(*registered)} fixes the preset; for a "
+            raise ValueError(f"config: the id {id_name} fixes the preset; for a "
                              "Config of your own use stori_jax.gym_adapter.StoriGymEnv(game, "
                              "config=...) or StoriVectorEnv(num_envs, game, config=...)")
         if registered is not None and not _names(game, preset, registered):
-            raise ValueError(f"this id is {env_id(*registered)}: it fixes game and preset, got "
+            raise ValueError(f"this id is {id_name}: it fixes game and preset, got "
                              f"game={game!r} preset={preset!r}; use that preset's own id")
         if "max_episode_steps" in make_kwargs:  # make_vec's default mode, or the classes
             # (gymnasium.make takes it itself, for its TimeLimit wrapper)
             raise ValueError("max_episode_steps: stori_jax envs cap episodes in emulator "
                              "frames: pass max_episode_frames (steps x frame_skip), got "
                              f"max_episode_steps={make_kwargs['max_episode_steps']!r}")
-        if make_kwargs.pop("render_mode", None) is not None:
-            raise ValueError("render_mode: stori_jax envs do not render (render_modes []); "
-                             "use `stori-jax record` for videos")
         for name in ("num_envs", "autoreset"):
             if name in make_kwargs:
                 raise ValueError(f"{name} is set by the gymnasium adapter ({self._fixed}), got "
                                  f"{name}={make_kwargs[name]!r}")
+        ale = take_ale_keywords(make_kwargs, ale_style, id_name)
+        if ale["render_mode"] is not None and not self._renders:
+            raise ValueError(f"render_mode: a stori_jax vector env does not render, got "
+                             f"render_mode={ale['render_mode']!r}; a single env does "
+                             "(gymnasium.make(id, render_mode='rgb_array')), and `stori-jax "
+                             "record` writes GIFs")
+        if ale["render_mode"] is not None and make_kwargs.get("obs") != "raw":
+            raise ValueError(f"render_mode={ale['render_mode']!r} needs the screens: obs_type "
+                             "'rgb' or 'grayscale' (obs='raw' on a -v0 id), got "
+                             + (f"obs={make_kwargs.get('obs', 'atari84')!r}"
+                                if ale["obs_type"] is None
+                                else f"obs_type={ale['obs_type']!r}"))
+        self._obs_type = ale["obs_type"]
+        self.render_mode = ale["render_mode"]
+        if ale["repeat_action_probability"] > 0:
+            make_kwargs["config"] = sticky_actions_config(
+                game, preset, make_kwargs.get("config"), ale["repeat_action_probability"],
+                make_kwargs.get("granularity"))
+            preset = None
+        self._game_name = game
+        self._frameskip = make_kwargs.get("frame_skip", 4)  # ale-py's name: AtariPreprocessing
         self._make = lambda s: stori_jax.make(game, preset, num_envs=num_envs, seed=s,
                                               autoreset=False, **make_kwargs)
         # an int: gymnasium takes no numpy seed
@@ -123,6 +295,20 @@ class _Owner:
         self._fresh = True  # no reset yet: the env is exactly as made from self._seed
         self._gym_reset_done = False  # gymnasium's reset not yet called (np_random unseeded)
         self.closed = False
+
+    def get_action_meanings(self) -> list[str]:
+        """ale-py's: the meaning of each action (the game's minimal action set)."""
+        return list(action_meanings(self._game_name))
+
+    def _spaces(self, single: gym.spaces.Box) -> gym.spaces.Box:
+        """One env's observation space as the adapter hands it out."""
+        if self._obs_type == "grayscale":
+            return gym.spaces.Box(0, 255, SCREEN_DIMS, np.uint8)
+        return single
+
+    def _observation(self, obs) -> np.ndarray:
+        obs = _numpy(obs)
+        return ale_grayscale(obs) if self._obs_type == "grayscale" else obs
 
     def _check_open(self):
         if self.closed:
@@ -174,31 +360,122 @@ class _Owner:
             self._env.close()
         self.closed = True  # a later reset(seed=...) must not make the env again
 
-    def render(self):
-        raise NotImplementedError("stori_jax envs do not render: `stori-jax record GAME PRESET` "
-                                  "writes an episode as a GIF, and obs='raw' gives RGB frames")
+
+
+class StoriALE:
+    """``env.unwrapped.ale`` of a single stori_jax env: what wrappers call on ale-py's
+    ``ALEInterface`` (gymnasium's ``AtariPreprocessing``, CleanRL's and SB3's ``EpisodicLifeEnv``
+    ...), answered from the env's last ``reset()`` or ``step()``.  The emulators run in worker
+    processes, so nothing here acts on them (no ``act``, ``cloneState``, ``setRAM``).
+
+    The screen is the observation's: the step's last frame at ``frameskip=1``; with ``frameskip``
+    k > 1, the max of the step's last two frames (STORI's raw observation), where ale-py's is the
+    last frame alone.  It needs a screen observation (obs_type ``rgb`` or ``grayscale``, or
+    ``obs='raw'``)."""
+
+    OFFERS = ("lives", "game_over", "getScreenRGB", "getScreenGrayscale", "getScreenDims",
+              "getRAM", "getRAMSize", "getMinimalActionSet", "getLegalActionSet")
+
+    def __init__(self, env: "StoriGymEnv"):
+        self._owner = env
+
+    def _last(self, name: str):
+        last = self._owner._last
+        if last is None:
+            raise RuntimeError(f"ale.{name}(): call reset() first (the emulators start there)")
+        return last
+
+    def lives(self) -> int:
+        return int(self._last("lives")["lives"])
+
+    def game_over(self, with_truncation: bool = True) -> bool:
+        last = self._last("game_over")
+        return bool(last["terminated"] or (with_truncation and last["truncated"]))
+
+    def _screen(self, name: str) -> np.ndarray:
+        screen = self._last(name)["screen"]
+        if screen is None:
+            raise RuntimeError(f"ale.{name}(): this env observes "
+                               f"{self._owner._obs_type or self._owner._env.plan.obs!r}, without "
+                               "the screen; make it with obs_type='rgb' or 'grayscale' "
+                               "(obs='raw' on a -v0 id)")
+        return screen
+
+    @staticmethod
+    def _into(out, value: np.ndarray) -> np.ndarray:
+        if out is None:
+            return value.copy()
+        np.copyto(out, value.reshape(np.shape(out)))  # ale-py fills a given buffer
+        return out
+
+    def getScreenRGB(self, screen_data=None) -> np.ndarray:
+        return self._into(screen_data, self._screen("getScreenRGB"))
+
+    def getScreenGrayscale(self, screen_data=None) -> np.ndarray:
+        return self._into(screen_data, ale_grayscale(self._screen("getScreenGrayscale")))
+
+    def getScreenDims(self) -> tuple[int, int]:
+        return SCREEN_DIMS
+
+    def getRAM(self, ram=None) -> np.ndarray:
+        return self._into(ram, self._last("getRAM")["ram"])
+
+    def getRAMSize(self) -> int:
+        return 128
+
+    def getMinimalActionSet(self) -> list:
+        from ale_py import Action
+
+        return [Action.__members__[name] for name in self._owner.get_action_meanings()]
+
+    def getLegalActionSet(self) -> list:
+        from ale_py import Action
+
+        return list(Action.__members__.values())
+
+    def __getattr__(self, name: str):
+        raise AttributeError(f"ale.{name}: stori_jax's stand-in for ale-py's ALEInterface offers "
+                             f"{', '.join(self.OFFERS)} (the emulators run in worker processes; "
+                             "step them with env.step)")
 
 
 class StoriGymEnv(_Owner, gym.Env):
     """One STORI env with gymnasium's single-env API (numpy outputs).  Call ``reset()`` after
     an episode ends: a ``step()`` instead resets the env (the new episode's first observation,
-    reward 0, ``info["reset_step"]`` True), as the batched env's next-step autoreset does."""
+    reward 0, ``info["reset_step"]`` True), as the batched env's next-step autoreset does.
 
-    metadata = {"render_modes": []}
+    ``unwrapped.ale`` (:class:`StoriALE`) and ``get_action_meanings()`` answer as ale-py's
+    ``AtariEnv`` does; ``render()`` with ``render_mode="rgb_array"`` returns the screen."""
+
+    metadata = {"render_modes": list(RENDER_MODES), "render_fps": 60}
+    _renders = True
     _fixed = ("one env, whose step after an episode's end starts the next one; "
               "gymnasium.make_vec(id, num_envs=N) for a batch")
 
     def __init__(self, game: str, preset: str | None = None, seed: int | None = None,
                  **make_kwargs):
+        self._last = None  # the last reset's or step's screen, lives, flags and RAM
         self._init_env(game, preset, 1, seed, make_kwargs)
-        self.observation_space = self._env.single_observation_space
+        # 60 emulator frames a second, frameskip of them a step
+        self.metadata = {**self.metadata, "render_fps": 60 / self._frameskip}
+        self.observation_space = self._spaces(self._env.single_observation_space)
         self.action_space = self._env.single_action_space
+        self.ale = StoriALE(self)
+
+    def _record(self, obs, info, terminated=False, truncated=False):
+        """What ``ale`` and ``render()`` answer until the next step; the observation out."""
+        first = _first_env_info(info)
+        screen = _numpy(obs[0]) if self._env.plan.obs == "raw" else None
+        self._last = {"screen": screen, "lives": first["lives"], "ram": first["ram"],
+                      "terminated": terminated, "truncated": truncated}
+        obs = screen.copy() if screen is not None else _numpy(obs[0])
+        return (ale_grayscale(obs) if self._obs_type == "grayscale" else obs), first
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         self._check_options(options)
         obs, info = self._reset_env(seed)  # checks the seed before gymnasium's np_random
         super().reset(seed=self._gym_seed(seed))
-        return _numpy(obs[0]), _first_env_info(info)
+        return self._record(np.asarray(obs), info)
 
     def step(self, action):
         self._check_steppable()
@@ -206,15 +483,30 @@ class StoriGymEnv(_Owner, gym.Env):
         if a.shape != () or not np.issubdtype(a.dtype, np.integer) or not 0 <= a < self.action_space.n:
             raise ValueError(f"action must be one int in [0, {self.action_space.n - 1}], "
                              f"got {action!r}")
-        obs, reward, terminated, truncated, info = self._env.step(a.reshape(1))
-        return (_numpy(obs[0]), float(reward[0]), bool(terminated[0]), bool(truncated[0]),
-                _first_env_info(info))
+        import jax
+
+        # one transfer, then numpy: indexing JAX arrays is a JAX dispatch each
+        obs, reward, terminated, truncated, info = jax.device_get(self._env.step(a.reshape(1)))
+        terminated, truncated = bool(terminated[0]), bool(truncated[0])
+        obs, info = self._record(obs, info, terminated, truncated)
+        return obs, float(reward[0]), terminated, truncated, info
+
+    def render(self):
+        """The screen (210, 160, 3) with ``render_mode="rgb_array"``, as ale-py's (see
+        :class:`StoriALE` for which frame)."""
+        if self.render_mode != "rgb_array":
+            raise ValueError(f"render() needs render_mode='rgb_array' (gymnasium.make(id, "
+                             f"render_mode='rgb_array')), this env has render_mode="
+                             f"{self.render_mode!r}; `stori-jax record GAME PRESET` writes an "
+                             "episode as a GIF")
+        return self.ale.getScreenRGB()
 
 
 class StoriVectorEnv(_Owner, VectorEnv):
     """B STORI envs as a gymnasium VectorEnv (numpy, autoreset mode NEXT_STEP)."""
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+    _renders = False
     _fixed = ("gymnasium's NEXT_STEP autoreset: the step after an env's episode ends starts "
               "its next one")
 
@@ -222,32 +514,39 @@ class StoriVectorEnv(_Owner, VectorEnv):
                  seed: int | None = None, **make_kwargs):
         self._init_env(game, preset, num_envs, seed, make_kwargs)
         self.num_envs = num_envs
-        self.single_observation_space = self._env.single_observation_space
+        self.single_observation_space = self._spaces(self._env.single_observation_space)
         self.single_action_space = self._env.single_action_space
-        self.observation_space = self._env.observation_space
+        self.observation_space = gym.vector.utils.batch_space(self.single_observation_space,
+                                                              num_envs)
         self.action_space = self._env.action_space
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         self._check_options(options)
         obs, info = self._reset_env(seed)
         super().reset(seed=self._gym_seed(seed))  # np_random(_seed), as gymnasium's vector envs
-        return _numpy(obs), _vector_info(info, self.num_envs)
+        return self._observation(obs), _vector_info(info, self.num_envs)
 
     def step(self, actions):
         self._check_steppable()
         obs, reward, terminated, truncated, info = self._env.step(actions)
-        return (_numpy(obs), _numpy(reward), _numpy(terminated), _numpy(truncated),
+        return (self._observation(obs), _numpy(reward), _numpy(terminated), _numpy(truncated),
                 _vector_info(info, self.num_envs))
 
 
 def register_all() -> None:
-    """Register every paper preset (idempotent)."""
+    """Register every paper preset (idempotent): ``<Game>-<preset>-v0`` (stori_jax's defaults),
+    ``<Game>-<preset>-v5`` and ``<Game>NoFrameskip-<preset>-v4`` (ale-py's)."""
     from stori_jax.presets import list_presets
 
     for game, preset in list_presets():
-        gid = env_id(game, preset)
-        if gid in gym.registry:
-            continue
-        gym.register(id=gid, entry_point="stori_jax.gym_adapter:StoriGymEnv",
-                     vector_entry_point="stori_jax.gym_adapter:StoriVectorEnv",
-                     kwargs={"game": game, "preset": preset, "registered_as": (game, preset)})
+        common = {"game": game, "preset": preset, "registered_as": (game, preset)}
+        ids = [(env_id(game, preset), common)]
+        for frameskip in (4, 1):
+            ids.append((ale_env_id(game, preset, frameskip),
+                        {**common, "ale_style": True, **ALE_ID_DEFAULTS, "frameskip": frameskip}))
+        for gid, kwargs in ids:
+            if gid in gym.registry:
+                continue
+            gym.register(id=gid, entry_point="stori_jax.gym_adapter:StoriGymEnv",
+                         vector_entry_point="stori_jax.gym_adapter:StoriVectorEnv",
+                         kwargs=kwargs)

@@ -27,7 +27,8 @@ def test_single_env_follows_gymnasium_api():
         assert info["labels"].keys() == set(stori_jax.get_game("Gopher").labels)
         assert all(np.shape(v) == () for v in info["labels"].values())
         assert info["ram"].shape == (128,) and np.shape(info["event_fired"]) == ()
-        with pytest.raises(NotImplementedError, match="stori-jax record"):
+        with pytest.raises(ValueError, match=r"render\(\) needs render_mode='rgb_array'.*"
+                                             r"stori-jax record"):
             env.unwrapped.render()
         with pytest.raises(ValueError, match=r"action must be one int in \[0, 7\]"):
             env.step(8)
@@ -126,7 +127,9 @@ def test_a_spec_saved_as_json_makes_the_env_again_and_max_episode_steps_is_named
     (dict(preset="1"), r"fixes game and preset, got game='Breakout' preset='1'"),
     (dict(num_envs=4), r"num_envs is set by the gymnasium adapter.*make_vec.*got num_envs=4"),
     (dict(autoreset=True), r"autoreset is set by the gymnasium adapter.*got autoreset=True"),
-    (dict(render_mode="rgb_array"), r"render_mode: stori_jax envs do not render"),
+    (dict(render_mode="rgb_array"), r"render_mode='rgb_array' needs the screens: obs_type "
+                                    r"'rgb' or 'grayscale' \(obs='raw' on a -v0 id\), got "
+                                    r"obs='atari84'"),
     (dict(config=stori_jax.Config()), r"config: the id .*Breakout-2\.1-v0 fixes the preset.*"
                                       r"StoriGymEnv\(game, config=\.\.\.\)"),
 ])
