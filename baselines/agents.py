@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Callable
 
 # name -> the module that defines its AGENT (imported on first use: the commands start fast)
-AGENT_MODULES = {"ppo": "baselines.ppo"}
+AGENT_MODULES = {"ppo": "baselines.ppo", "drq": "baselines.drq"}
 RANDOM = "random"  # the uniformly random policy: evaluated, never trained
 
 

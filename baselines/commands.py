@@ -76,7 +76,8 @@ def add_parsers(sub) -> None:
                        help="a folder of runs (<game>-<preset>/<agent>-seed<S>/eval-*.json)")
     table.add_argument("--out", type=Path, default=None, help="default: RESULTS_DIR")
     table.add_argument("--policy", choices=list(CHECKPOINT_POLICIES), default="sampled",
-                       help="which PPO evaluation the table shows (default sampled)")
+                       help="which evaluation of the trained agents the table shows "
+                            "(default sampled)")
 
 
 def _parse_overrides(items: list[str]) -> dict[str, str]:

@@ -1,6 +1,9 @@
 """``stori-jax table RESULTS_DIR``: every evaluation under RESULTS_DIR aggregated into the
 paper's layout (game x preset, mean ± std over seeds) beside the paper's DreamerV3 and STORM
-numbers, as markdown and JSON, and learning curves per game (PNG, one panel per preset).
+numbers, as markdown and JSON, and learning curves per game (PNG, one panel per preset, a row
+of panels per agent).  The table has a column per trained agent of :mod:`baselines.agents`
+that has evaluations here (in ``AGENT_MODULES``' order), then the random policy's, then the
+paper's; each run's config is read by its agent's ``config_class``.
 
 It reads ``eval-<policy>.json`` files (written by ``stori-jax eval``) and, for the curves, the
 ``episodes.csv`` of each training run (written by ``stori-jax train``), wherever they lie below
@@ -18,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from baselines.agents import RANDOM, agent_names, get_agent
 from baselines.evaluate import CHECKPOINT_POLICIES, stori_game
 from stori_jax.checks import MAX_SEED, check_int, check_real
 from stori_jax.presets import canonical_preset
@@ -60,7 +64,7 @@ PAPER_ENVIRONMENT_DIFFERS = {
                           "level; here the level is kept (STORI_SPEC section 8)",
 }
 EVAL_KEYS = ("game", "preset", "agent", "policy", "train_seed", "mean_return", "episodes")
-AGENTS = ("ppo", "random")  # the table's agent columns, PPO and Random
+RANDOM_COLUMN = "Random"  # the random policy's column, after the trained agents'
 
 
 def _read_json_object(path: Path, what: str) -> dict:
@@ -84,12 +88,14 @@ def _check_evaluation(path: Path, result: dict) -> None:
     for key in ("game", "preset"):
         if not isinstance(result[key], str):
             raise ValueError(f"{path}: {key} must be a string, got {result[key]!r}")
-    if result["agent"] not in AGENTS:
-        raise ValueError(f"{path}: agent must be one of {list(AGENTS)}, got {result['agent']!r}")
-    if result["policy"] not in POLICIES or (result["agent"] == "random") != (
+    if result["agent"] not in [*agent_names(), RANDOM]:
+        raise ValueError(f"{path}: agent must be one of {[*agent_names(), RANDOM]}, got "
+                         f"{result['agent']!r}")
+    if result["policy"] not in POLICIES or (result["agent"] == RANDOM) != (
             result["policy"] == "random"):
         raise ValueError(f"{path}: policy {result['policy']!r} does not go with agent "
-                         f"{result['agent']!r} (random: 'random'; ppo: 'sampled' or 'greedy')")
+                         f"{result['agent']!r} (random: 'random'; a trained agent: 'sampled' "
+                         "or 'greedy')")
     check_int(f"{path}: train_seed", result["train_seed"], 0)
     check_int(f"{path}: episodes", result["episodes"], 1)
     for key, minimum in (("max_episode_frames", 1), ("truncated", 0)):  # older files lack them
@@ -121,21 +127,40 @@ def load_evaluations(results_dir: Path) -> list[dict]:
     return found
 
 
+def trained_agents(evaluations: list[dict]) -> list[str]:
+    """The trained agents with evaluations among ``evaluations``, in AGENT_MODULES' order."""
+    found = {e["agent"] for e in evaluations}
+    return [name for name in agent_names() if name in found]
+
+
+def agent_columns(rows: list[dict]) -> list[str]:
+    """The trained agents' columns of the table's rows (their titles), in order."""
+    skip = {"game", "preset", RANDOM_COLUMN, "DreamerV3", "STORM"}
+    return [key for key in rows[0] if key not in skip] if rows else []
+
+
 def aggregate(evaluations: list[dict], ppo_policy: str = "sampled") -> list[dict]:
     """One row per (game, preset): per agent, the mean over seeds of each seed's mean return,
-    and the standard deviation over seeds (ddof=1, as usual for 'mean ± std over 3 seeds')."""
+    and the standard deviation over seeds (ddof=1, as usual for 'mean ± std over 3 seeds').
+    A column per trained agent with evaluations (its title), of their ``ppo_policy``
+    evaluations (the name is from when PPO was the only agent; it applies to every one), then
+    Random."""
     if ppo_policy not in CHECKPOINT_POLICIES:
         raise ValueError(f"ppo_policy must be one of {list(CHECKPOINT_POLICIES)}, "
                          f"got {ppo_policy!r}")
-    policies = {e["policy"] for e in evaluations if e["agent"] == "ppo"}
-    if policies and ppo_policy not in policies:
-        raise ValueError(f"no PPO evaluation with policy {ppo_policy!r}: the PPO evaluations "
-                         f"here are {sorted(policies)} (stori-jax eval --policy {ppo_policy} "
-                         "writes one)")
+    agents = trained_agents(evaluations)
+    titles = {name: get_agent(name).title for name in agents}
+    for name in agents:
+        policies = {e["policy"] for e in evaluations if e["agent"] == name}
+        if ppo_policy not in policies:
+            title = titles[name]
+            raise ValueError(f"no {title} evaluation with policy {ppo_policy!r}: the {title} "
+                             f"evaluations here are {sorted(policies)} (stori-jax eval --policy "
+                             f"{ppo_policy} writes one)")
     per_cell = defaultdict(lambda: defaultdict(dict))
     for e in evaluations:
-        column = "Random" if e["agent"] == "random" else (
-            "PPO" if e["policy"] == ppo_policy else None)
+        column = RANDOM_COLUMN if e["agent"] == RANDOM else (
+            titles[e["agent"]] if e["policy"] == ppo_policy else None)
         if column is None:
             continue
         seeds = per_cell[(e["game"], e["preset"])][column]
@@ -146,7 +171,7 @@ def aggregate(evaluations: list[dict], ppo_policy: str = "sampled") -> list[dict
     rows = []
     for (game, preset), columns in sorted(per_cell.items(), key=lambda kv: _order(*kv[0])):
         row = dict(game=game, preset=preset)
-        for column in ("PPO", "Random"):
+        for column in [*titles.values(), RANDOM_COLUMN]:
             seeds = columns.get(column, {})
             means = [seeds[s]["mean_return"] for s in sorted(seeds)]
             row[column] = dict(
@@ -170,7 +195,7 @@ def _training(result: dict, path: Path) -> dict | None:
     recorded it, or, for an older one, from the training run it lies in (its summary.json, or
     its config.json and the last global_step of its log.csv); None where nothing says, and for
     the random policy."""
-    from baselines.ppo import TRAINING_KEYS, PPOConfig, progress_of
+    from baselines.ppo import TRAINING_KEYS
 
     def checked(values) -> dict | None:
         steps, total, finished = values
@@ -178,8 +203,9 @@ def _training(result: dict, path: Path) -> dict | None:
                   for v in (steps, total)) and isinstance(finished, bool))
         return dict(zip(TRAINING_KEYS, values)) if ok else None
 
-    if result["agent"] != "ppo":
+    if result["agent"] == RANDOM:
         return None
+    agent = get_agent(result["agent"])
     if all(k in result for k in TRAINING_KEYS):
         return checked([result[k] for k in TRAINING_KEYS])
     run = path.parent
@@ -191,12 +217,14 @@ def _training(result: dict, path: Path) -> dict | None:
         pass
     steps = _logged_last_step(run)
     try:
-        config = PPOConfig.from_recorded(json.loads((run / "config.json").read_text()))
+        config = agent.config_class.from_recorded(json.loads((run / "config.json").read_text()))
     except (OSError, ValueError, KeyError, TypeError):  # no training run here
         return None
     if steps is None:
         return None
-    return checked([progress_of(config, steps)[k] for k in TRAINING_KEYS])
+    per_iteration = agent.steps_per_iteration(config)
+    trained = -(-config.total_steps // per_iteration) * per_iteration  # whole iterations
+    return checked([steps, config.total_steps, steps >= trained])
 
 
 def _order(game: str, preset: str):
@@ -219,26 +247,48 @@ STD_OVER_SEEDS = ("Ours: mean ± std over seeds of each seed's mean return, the 
 
 
 def markdown(rows: list[dict], ppo_policy: str = "sampled") -> str:
-    """The table; its PPO column names the policy where it is not the default, sampled."""
-    ppo = "PPO (ours)" if ppo_policy == "sampled" else f"PPO {ppo_policy} (ours)"
-    lines = [f"| game | preset | {ppo} | Random (ours) | DreamerV3 (paper) | STORM (paper) | "
-             "seeds (PPO) | episodes per seed |", "|---|---|---|---|---|---|---|---|"]
+    """The table; its agents' columns name the policy where it is not the default, sampled.
+    The seeds column lists the first agent's seeds, and any other column's that differ."""
+    agents = agent_columns(rows)
+    policy = "" if ppo_policy == "sampled" else f" {ppo_policy}"
+    header = [f"{title}{policy} (ours)" for title in agents] + [
+        "Random (ours)", "DreamerV3 (paper)", "STORM (paper)",
+        f"seeds ({agents[0]})" if agents else "seeds", "episodes per seed"]
+    lines = ["| game | preset | " + " | ".join(header) + " |",
+             "|---|---|" + "---|" * len(header)]
+    columns = [*agents, RANDOM_COLUMN]
     for r in rows:
-        seeds = ", ".join(str(s) for s in r["PPO"]["seeds"])
-        if r["Random"]["seeds"] and r["Random"]["seeds"] != r["PPO"]["seeds"]:
-            seeds += ("; " if seeds else "") + "Random: " + ", ".join(
-                str(s) for s in r["Random"]["seeds"])
+        base = r[columns[0]]["seeds"]
+        seeds = ", ".join(str(s) for s in base)
+        for column in columns[1:]:
+            if r[column]["seeds"] and r[column]["seeds"] != base:
+                seeds += ("; " if seeds else "") + f"{column}: " + ", ".join(
+                    str(s) for s in r[column]["seeds"])
         seeds = seeds or "-"
-        episodes = sorted(set(r["PPO"]["episodes"] + r["Random"]["episodes"]))
-        lines.append(f"| {r['game']} | {r['preset']} | {_cell(r['PPO'])} | {_cell(r['Random'])}"
+        episodes = sorted(set().union(*(r[column]["episodes"] for column in columns)))
+        cells = [_cell(r[column]) for column in columns]
+        lines.append(f"| {r['game']} | {r['preset']} | {' | '.join(cells)}"
                      f" | {_cell(r['DreamerV3'])} | {_cell(r['STORM'])} | {seeds} | "
                      f"{', '.join(map(str, episodes))} |")
     return "\n".join(lines) + "\n"
 
 
-def learning_curves(results_dir: Path) -> dict[tuple[str, str], list[tuple]]:
-    """Per (game, preset), per training run: (global_step and return of every episode, seed,
-    the run's last agent step, its config)."""
+def run_agent(config: dict) -> str:
+    """The agent whose run a config.json is: the first of AGENT_MODULES whose config_class
+    reads it (each agent's has fields the others' lack; a config of none of them is the first
+    agent's, compared as written)."""
+    for name in agent_names():
+        try:
+            get_agent(name).config_class.from_recorded(config)
+        except (TypeError, ValueError):
+            continue
+        return name
+    return agent_names()[0]
+
+
+def learning_curves(results_dir: Path) -> dict[tuple[str, str, str], list[tuple]]:
+    """Per (game, preset, agent), per training run: (global_step and return of every episode,
+    seed, the run's last agent step, its config)."""
     curves, where = defaultdict(list), defaultdict(dict)
     for path in sorted(Path(results_dir).rglob("episodes.csv")):
         config_path = path.parent / "config.json"
@@ -269,13 +319,13 @@ def learning_curves(results_dir: Path) -> dict[tuple[str, str], list[tuple]]:
             returns = np.array([float(r["return"]) for r in rows])
         except (TypeError, ValueError) as e:  # TypeError: a row shorter than the header
             raise ValueError(f"{path}: a global_step or return is not a number ({e})") from None
-        curves[(game, preset)].append(
-            (steps, returns, seed, _last_step(path.parent, steps), config))
-        if seed in where[(game, preset)]:  # as aggregate() refuses two evaluations of a seed
+        panel = (game, preset, run_agent(config))
+        curves[panel].append((steps, returns, seed, _last_step(path.parent, steps), config))
+        if seed in where[panel]:  # as aggregate() refuses two evaluations of a seed
             raise ValueError(f"two training runs of {game} {preset} seed {seed}: "
-                             f"{where[(game, preset)][seed]} and {path.parent} (the curves "
+                             f"{where[panel][seed]} and {path.parent} (the curves "
                              "would pool both as one seed; move one out of RESULTS_DIR)")
-        where[(game, preset)][seed] = path.parent
+        where[panel][seed] = path.parent
     for runs in curves.values():
         runs.sort(key=lambda run: run[2])
     return curves
@@ -318,16 +368,16 @@ def steps_label(value: float, _position) -> str:
     return f"{value / 1e3:g}k" if abs(value) >= 1e3 else f"{value:g}"
 
 
-def _hyperparameters(config: dict) -> dict:
-    """A run's config as training read it (a field that an older run's config.json lacks is
-    its default), without what does not change the training: the seed, the checkpoints."""
-    from baselines.ppo import PPOConfig
-
+def _hyperparameters(config: dict, agent: str) -> dict:
+    """A run's config as its ``agent``'s training read it (a field that an older run's
+    config.json lacks is its default), without what does not change the training: the seed,
+    the checkpoints and the log's rows."""
     try:
-        config = dataclasses.asdict(PPOConfig.from_recorded(config))
+        config = dataclasses.asdict(get_agent(agent).config_class.from_recorded(config))
     except (TypeError, ValueError):  # not one of ours: compare it as written
         pass
-    return {k: v for k, v in config.items() if k not in ("seed", "checkpoint_every")}
+    return {k: v for k, v in config.items()
+            if k not in ("seed", "checkpoint_every", "log_every")}
 
 
 def paper_notes(rows: list[dict]) -> list[str]:
@@ -338,13 +388,13 @@ def paper_notes(rows: list[dict]) -> list[str]:
 
 
 def training_notes(rows: list[dict]) -> list[str]:
-    """PPO evaluations that do not stand beside the paper's 100k-step numbers as they are:
-    checkpoints of unfinished runs, runs of another budget, and checkpoints whose training
-    nothing records."""
+    """Trained agents' evaluations that do not stand beside the paper's 100k-step numbers as
+    they are: checkpoints of unfinished runs, runs of another budget, and checkpoints whose
+    training nothing records."""
     notes = []
-    for r in rows:
-        row = f"{r['game']} {r['preset']} PPO"
-        runs = list(zip(r["PPO"]["seeds"], r["PPO"]["training"]))
+    for r, column in ((r, column) for r in rows for column in agent_columns(rows)):
+        row = f"{r['game']} {r['preset']} {column}"
+        runs = list(zip(r[column]["seeds"], r[column]["training"]))
         unknown = [seed for seed, training in runs if training is None]
         if unknown:
             notes.append(f"{row} seed(s) {unknown}: how far the evaluated checkpoints had "
@@ -369,7 +419,7 @@ def evaluation_notes(rows: list[dict]) -> list[str]:
     notes = []
     for r in rows:
         caps = set()
-        for column in ("PPO", "Random"):
+        for column in [*agent_columns(rows), RANDOM_COLUMN]:
             cell = r[column]
             for seed, episodes, cap, cut in zip(cell["seeds"], cell["episodes"],
                                                 cell["max_episode_frames"], cell["truncated"]):
@@ -385,32 +435,44 @@ def evaluation_notes(rows: list[dict]) -> list[str]:
     return notes
 
 
+def _panel_order(panel: tuple[str, str, str]):
+    """Curves' panels in the table's order: game, preset, then agent (AGENT_MODULES')."""
+    game, preset, agent = panel
+    return (*_order(game, preset), agent_names().index(agent))
+
+
 def table_notes(curves: dict, evaluations: list[dict], ppo_policy: str) -> list[str]:
     """What a reader of the table and the curves should know: training runs the table leaves
     out (no evaluation of ``ppo_policy``), and runs pooled in one panel with different
-    hyperparameters."""
-    evaluated = {(e["game"], e["preset"], e.get("train_seed")) for e in evaluations
-                 if e["agent"] == "ppo" and e.get("policy") == ppo_policy}
+    hyperparameters.  Where the curves hold runs of several agents, each note names its
+    agent."""
+    evaluated = {(e["game"], e["preset"], e["agent"], e.get("train_seed")) for e in evaluations
+                 if e["agent"] != RANDOM and e.get("policy") == ppo_policy}
+    several = len({agent for *_, agent in curves}) > 1
     notes = []
-    for (game, preset), runs in sorted(curves.items(), key=lambda kv: _order(*kv[0])):
-        left_out = [seed for *_, seed, _, _ in runs if (game, preset, seed) not in evaluated]
+    for (game, preset, agent), runs in sorted(curves.items(),
+                                              key=lambda kv: _panel_order(kv[0])):
+        where = f"{game} {preset}" + (f" {get_agent(agent).title}" if several else "")
+        left_out = [seed for *_, seed, _, _ in runs
+                    if (game, preset, agent, seed) not in evaluated]
         if left_out:
-            notes.append(f"{game} {preset}: seed(s) {left_out} have no eval-{ppo_policy}.json: "
+            notes.append(f"{where}: seed(s) {left_out} have no eval-{ppo_policy}.json: "
                          "in the curves, not in the table")
-        settings = {json.dumps(_hyperparameters(config), sort_keys=True) for *_, config in runs}
-        if len(settings) > 1:
-            configs = [_hyperparameters(config) for *_, config in runs]
+        configs = [_hyperparameters(config, agent) for *_, config in runs]
+        if len({json.dumps(c, sort_keys=True) for c in configs}) > 1:
             differ = sorted(k for k in set().union(*configs)
                             if len({json.dumps(c.get(k)) for c in configs}) > 1)
-            notes.append(f"{game} {preset}: the runs pooled in the curves (and, where "
+            notes.append(f"{where}: the runs pooled in the curves (and, where "
                          f"evaluated, in the table's mean) differ in {', '.join(differ)}")
     return notes
 
 
 def plot_curves(curves: dict, evaluations: list[dict], out_dir: Path,
                 window: int = 20) -> list[Path]:
-    """One PNG per game of ``learning_curves``: a panel per preset, each seed's smoothed curve
-    and their mean, with the random policy's evaluation mean as a dashed line where one exists."""
+    """One PNG per game of ``learning_curves``: a panel per preset (a row of them per agent
+    where several agents have runs, each panel's title naming its agent), each seed's
+    smoothed curve and their mean, with the random policy's evaluation mean as a dashed line
+    where one exists."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -419,49 +481,59 @@ def plot_curves(curves: dict, evaluations: list[dict], out_dir: Path,
 
     random_means = defaultdict(list)
     for e in evaluations:
-        if e["agent"] == "random":
+        if e["agent"] == RANDOM:
             random_means[(e["game"], e["preset"])].append(e["mean_return"])
     written = []
-    for game in sorted({g for g, _ in curves}, key=lambda g: _order(g, "")):
-        presets = sorted((p for g, p in curves if g == game), key=lambda p: _order(game, p))
+    for game in sorted({g for g, _, _ in curves}, key=lambda g: _order(g, "")):
+        presets = sorted({p for g, p, _ in curves if g == game}, key=lambda p: _order(game, p))
+        agents = [a for a in agent_names() if any((game, p, a) in curves for p in presets)]
         # one colour per seed in every panel, and one legend for them all
-        seeds = sorted({run[2] for p in presets for run in curves[(game, p)]})
+        seeds = sorted({run[2] for (g, _, _), runs in curves.items() if g == game
+                        for run in runs})
         colour = {seed: f"C{i % 10}" for i, seed in enumerate(seeds)}
-        fig, axes = plt.subplots(1, len(presets), figsize=(4 * len(presets), 3.2),
-                                 squeeze=False, sharey=True)
-        legend = {}
-        for ax, preset in zip(axes[0], presets):
-            runs = curves[(game, preset)]
-            ends = [end for *_, end, _ in runs]
-            grid = np.linspace(0, max(max(ends), 1), 100)
-            lines, silent = [], []
-            for steps, returns, seed, end, _ in runs:
-                line = smoothed(steps, returns, grid, window, end)
-                lines.append(line)
-                if np.isnan(line).all():
-                    silent.append(seed)
-                legend[f"seed {seed}"] = ax.plot(grid, line, lw=0.8, alpha=0.5,
-                                                 color=colour[seed], label=f"seed {seed}")[0]
-            mean = np.mean(np.array(lines), axis=0)  # NaN where a seed has no data: none
-            legend["mean over seeds"] = ax.plot(grid, mean, color="black", lw=1.6,
-                                                label="mean over seeds")[0]
-            if silent:  # its curve is empty, and so is the mean over seeds
-                ax.text(0.02, 0.97, f"seed(s) {silent}: no finished episode,\nso no mean",
-                        transform=ax.transAxes, va="top", fontsize=7,  # over any line
-                        bbox=dict(facecolor="white", alpha=0.85, edgecolor="none"), zorder=5)
-            if random_means.get((game, preset)):
-                legend["random policy (eval)"] = ax.axhline(
-                    np.mean(random_means[(game, preset)]), color="grey", ls="--",
-                    label="random policy (eval)")
-            ax.set_title(f"{game} {preset}")
-            ax.set_xlabel("agent steps")
-            ax.set_xlim(0, grid[-1])  # also where no curve has a point
-            ax.xaxis.set_major_formatter(FuncFormatter(steps_label))
-            ax.grid(alpha=0.3)
-        axes[0][0].set_ylabel(f"episode return (mean of last {window})")
-        order = [f"seed {seed}" for seed in seeds] + ["mean over seeds", "random policy (eval)"]
-        labels = [label for label in order if label in legend]
-        axes[0][-1].legend([legend[label] for label in labels], labels, fontsize=7)
+        fig, axes = plt.subplots(len(agents), len(presets),
+                                 figsize=(4 * len(presets), 3.2 * len(agents)), squeeze=False,
+                                 sharey=True)
+        for row, agent in zip(axes, agents):
+            named = f"{get_agent(agent).title}: " if len(agents) > 1 else ""
+            legend = {}
+            for ax, preset in zip(row, presets):
+                ax.set_title(f"{named}{game} {preset}")
+                ax.set_xlabel("agent steps")
+                ax.grid(alpha=0.3)
+                runs = curves.get((game, preset, agent), [])
+                if not runs:
+                    ax.text(0.5, 0.5, "no runs", transform=ax.transAxes, ha="center")
+                    continue
+                ends = [end for *_, end, _ in runs]
+                grid = np.linspace(0, max(max(ends), 1), 100)
+                lines, silent = [], []
+                for steps, returns, seed, end, _ in runs:
+                    line = smoothed(steps, returns, grid, window, end)
+                    lines.append(line)
+                    if np.isnan(line).all():
+                        silent.append(seed)
+                    legend[f"seed {seed}"] = ax.plot(grid, line, lw=0.8, alpha=0.5,
+                                                     color=colour[seed], label=f"seed {seed}")[0]
+                mean = np.mean(np.array(lines), axis=0)  # NaN where a seed has no data: none
+                legend["mean over seeds"] = ax.plot(grid, mean, color="black", lw=1.6,
+                                                    label="mean over seeds")[0]
+                if silent:  # its curve is empty, and so is the mean over seeds
+                    ax.text(0.02, 0.97, f"seed(s) {silent}: no finished episode,\nso no mean",
+                            transform=ax.transAxes, va="top", fontsize=7,  # over any line
+                            bbox=dict(facecolor="white", alpha=0.85, edgecolor="none"),
+                            zorder=5)
+                if random_means.get((game, preset)):
+                    legend["random policy (eval)"] = ax.axhline(
+                        np.mean(random_means[(game, preset)]), color="grey", ls="--",
+                        label="random policy (eval)")
+                ax.set_xlim(0, grid[-1])  # also where no curve has a point
+                ax.xaxis.set_major_formatter(FuncFormatter(steps_label))
+            row[0].set_ylabel(f"episode return (mean of last {window})")
+            order = [f"seed {seed}" for seed in seeds] + ["mean over seeds",
+                                                          "random policy (eval)"]
+            labels = [label for label in order if label in legend]
+            row[-1].legend([legend[label] for label in labels], labels, fontsize=7)
         fig.tight_layout()
         out_dir.mkdir(parents=True, exist_ok=True)
         path = out_dir / f"curves-{game}.png"

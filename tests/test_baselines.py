@@ -1425,7 +1425,8 @@ def test_curves_stop_where_a_run_stopped_and_the_table_names_what_it_leaves_out(
         fake_eval(tmp_path, "Boxing", "3.1", "ppo", seed, 1.0)
     build_table(tmp_path, tmp_path / "out")
     assert "Boxing 3.1: the runs pooled" not in capsys.readouterr().err
-    short = next(run for run in learning_curves(tmp_path)[("Breakout", "2.1")] if run[2] == 0)
+    short = next(run for run in learning_curves(tmp_path)[("Breakout", "2.1", "ppo")]
+                 if run[2] == 0)
     steps, returns, _, end, _ = short
     assert end == 1000  # the log's last step, past the last episode's
     line = smoothed(steps, returns, np.array([600.0, 1000.0, 5000.0]), 20, end)
@@ -1806,7 +1807,7 @@ def test_evaluate_asks_the_checkpoint_for_the_policy_it_was_given(uninterrupted,
         asked.append(args[0] if args else kwargs.get("mode", "sampled"))
         return real(ckpt, *args, **kwargs)
 
-    monkeypatch.setattr(ppo, "policy_of", spy)
+    monkeypatch.setattr(ppo, "AGENT", dataclasses.replace(ppo.AGENT, policy_of=spy))
     for policy in ("greedy", "sampled"):
         result = evaluate("Breakout", "1", policy=policy, episodes=1, num_envs=1,
                           checkpoint=full / "checkpoint.pkl", max_episode_frames=40,

@@ -113,7 +113,7 @@ def test_corrupt_checkpoints_say_why(name, why, files, capsys):
     ("tb_list", "got list"),
     ("tb_types", "eval-x.json: mean_return must be a finite number, got 'abc'"),
     ("tb_seed", "train_seed must be >= 0, got -1"),
-    ("tb_dqn", "agent must be one of ['ppo', 'random'], got 'dqn'"),
+    ("tb_dqn", "agent must be one of ['ppo', 'drq', 'random'], got 'dqn'"),
     ("tb_mixed", "policy 'greedy' does not go with agent 'random'"),
     ("tb_episodes", "eval-x.json: episodes must be >= 1, got 0"),
     ("tb_curve", "run/episodes.csv lacks the columns ['global_step', 'return']"),
