@@ -205,3 +205,4 @@ class EnvpoolBackend:
         if not self._closed:
             self._closed = True
             self.pool.close()
+from envpool_bridge.facade import make  # noqa: E402,F401 - envpool.make over stori_jax (docs/drop-in.md)

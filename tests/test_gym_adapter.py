@@ -599,3 +599,308 @@ def test_a_vector_env_whose_worker_died_steps_only_after_a_reset_from_its_seed()
     finally:
         envs.close()
         fresh.close()
+
+
+# -- ale-py's AtariEnv surface: keywords, ids, env.unwrapped.ale, the wrapper stacks -------------
+
+class NoopResetEnv(gym.Wrapper):
+    """SB3's (stable_baselines3.common.atari_wrappers, which CleanRL imports), on gymnasium."""
+
+    def __init__(self, env, noop_max=30):
+        super().__init__(env)
+        self.noop_max = noop_max
+        assert env.unwrapped.get_action_meanings()[0] == "NOOP"
+
+    def reset(self, **kwargs):
+        self.env.reset(**kwargs)
+        noops = self.unwrapped.np_random.integers(1, self.noop_max + 1)
+        obs, info = np.zeros(0), {}
+        for _ in range(noops):
+            obs, _, terminated, truncated, info = self.env.step(0)
+            if terminated or truncated:
+                obs, info = self.env.reset(**kwargs)
+        return obs, info
+
+
+class FireResetEnv(gym.Wrapper):
+    def __init__(self, env):
+        super().__init__(env)
+        assert env.unwrapped.get_action_meanings()[1] == "FIRE"
+        assert len(env.unwrapped.get_action_meanings()) >= 3
+
+    def reset(self, **kwargs):
+        self.env.reset(**kwargs)
+        obs, _, terminated, truncated, _ = self.env.step(1)
+        if terminated or truncated:
+            self.env.reset(**kwargs)
+        obs, _, terminated, truncated, _ = self.env.step(2)
+        if terminated or truncated:
+            self.env.reset(**kwargs)
+        return obs, {}
+
+
+class EpisodicLifeEnv(gym.Wrapper):
+    def __init__(self, env):
+        super().__init__(env)
+        self.lives, self.was_real_done = 0, True
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.was_real_done = terminated or truncated
+        lives = self.env.unwrapped.ale.lives()
+        if 0 < lives < self.lives:
+            terminated = True
+        self.lives = lives
+        return obs, reward, terminated, truncated, info
+
+    def reset(self, **kwargs):
+        if self.was_real_done:
+            obs, info = self.env.reset(**kwargs)
+        else:
+            obs, _, terminated, truncated, info = self.env.step(0)
+            if terminated or truncated:
+                obs, info = self.env.reset(**kwargs)
+        self.lives = self.env.unwrapped.ale.lives()
+        return obs, info
+
+
+class MaxAndSkipEnv(gym.Wrapper):
+    def __init__(self, env, skip=4):
+        super().__init__(env)
+        self._obs_buffer = np.zeros((2,) + env.observation_space.shape, env.observation_space.dtype)
+        self._skip = skip
+
+    def step(self, action):
+        total_reward, terminated, truncated, info = 0.0, False, False, {}
+        for i in range(self._skip):
+            obs, reward, terminated, truncated, info = self.env.step(action)
+            if i == self._skip - 2:
+                self._obs_buffer[0] = obs
+            if i == self._skip - 1:
+                self._obs_buffer[1] = obs
+            total_reward += float(reward)
+            if terminated or truncated:
+                break
+        return self._obs_buffer.max(axis=0), total_reward, terminated, truncated, info
+
+
+class ClipRewardEnv(gym.RewardWrapper):
+    def reward(self, reward):
+        return np.sign(reward)
+
+
+def cleanrl_env(env_id, **kwargs):
+    """CleanRL's ppo_atari.py make_env stack (its SB3 wrappers, then gymnasium's)."""
+    env = gym.make(env_id, **kwargs)
+    env = gym.wrappers.RecordEpisodeStatistics(env)
+    env = NoopResetEnv(env, noop_max=30)
+    env = MaxAndSkipEnv(env, skip=4)
+    env = EpisodicLifeEnv(env)
+    if "FIRE" in env.unwrapped.get_action_meanings():
+        env = FireResetEnv(env)
+    env = ClipRewardEnv(env)
+    env = gym.wrappers.ResizeObservation(env, (84, 84))
+    env = gym.wrappers.GrayscaleObservation(env)
+    return gym.wrappers.FrameStackObservation(env, 4)
+
+
+def test_ale_grayscale_is_ales_own_luminance():
+    """getScreenGrayscale of the stand-in is ALE's: compared pixel for pixel with ale-py's."""
+    import ale_py
+    from ale_py import roms
+
+    from stori_jax.gym_adapter import ale_grayscale
+
+    ale_py.ALEInterface.setLoggerMode(ale_py.LoggerMode.Error)
+    rng = np.random.default_rng(0)
+    for rom in ("breakout", "boxing", "gopher", "bank_heist"):
+        ale = ale_py.ALEInterface()
+        ale.loadROM(roms.get_rom_path(rom))
+        actions = ale.getMinimalActionSet()
+        for t in range(120):
+            ale.act(actions[rng.integers(len(actions))])
+            if t % 40 == 39:
+                np.testing.assert_array_equal(ale_grayscale(ale.getScreenRGB()),
+                                              ale.getScreenGrayscale())
+
+
+def test_atari_preprocessing_over_a_noframeskip_id_plays_ale_pys_frames():
+    """gymnasium's AtariPreprocessing (frame skip, max-pool, resize, terminal_on_life_loss
+    through ale.lives(), ale.getScreenGrayscale into its buffers) and FrameStackObservation
+    run unchanged over stori_ALE/...NoFrameskip-v4; over preset 3.1 (nothing random) they see
+    exactly what they see over ale-py's own env, frame for frame."""
+    import ale_py
+
+    gym.register_envs(ale_py)
+
+    def run(env):
+        env = gym.wrappers.FrameStackObservation(
+            gym.wrappers.AtariPreprocessing(env, noop_max=0, terminal_on_life_loss=True), 4)
+        try:
+            obs, _ = env.reset(seed=0)
+            frames, flags = [obs], []
+            rng = np.random.default_rng(0)
+            for _ in range(100):
+                obs, reward, terminated, truncated, info = env.step(int(rng.integers(4)))
+                frames.append(obs)
+                flags.append((reward, terminated, truncated, info["lives"]))
+                if terminated or truncated:
+                    frames.append(env.reset()[0])
+            return env.observation_space, np.stack(frames), flags
+        finally:
+            env.close()
+
+    ours = run(gym.make("stori_jax:stori_ALE/BreakoutNoFrameskip-3.1-v4", num_workers=0))
+    theirs = run(gym.make("ALE/Breakout-v5", frameskip=1, repeat_action_probability=0.0))
+    assert ours[0] == theirs[0] == gym.spaces.Box(0, 255, (4, 84, 84), np.uint8)
+    np.testing.assert_array_equal(ours[1], theirs[1])
+    assert ours[2] == theirs[2]
+    assert sum(terminated for _, terminated, _, _ in ours[2]) >= 1  # a life lost on the way
+
+
+def test_cleanrls_wrapper_stack_runs_over_a_preset_and_a_seed_repeats_the_run():
+    """CleanRL's ppo_atari.py stack (NoopReset, MaxAndSkip, EpisodicLife, FireReset, ClipReward,
+    resize, gray, stack) over a 2.1 preset: EpisodicLifeEnv ends the agent's episode exactly
+    where the game's lives drop, and seed 5's run is the same twice (and not seed 6's)."""
+    def run(seed):
+        env = cleanrl_env("stori_jax:stori_ALE/BreakoutNoFrameskip-2.1-v4", num_workers=0)
+        try:
+            obs, _ = env.reset(seed=seed)
+            assert obs.shape == (4, 84, 84) and obs.dtype == np.uint8
+            trace, lives = [obs], env.unwrapped.ale.lives()
+            rng = np.random.default_rng(1)
+            for _ in range(60):
+                obs, reward, terminated, truncated, info = env.step(int(rng.integers(4)))
+                assert reward in (-1.0, 0.0, 1.0)
+                assert terminated == (info["lives"] < lives or bool(info["lives"] == 0))
+                lives = info["lives"]
+                trace.append(obs)
+                if terminated or truncated:
+                    obs, _ = env.reset()
+                    lives = env.unwrapped.ale.lives()
+                    trace.append(obs)
+            return np.stack(trace)
+        finally:
+            env.close()
+
+    first = run(5)
+    np.testing.assert_array_equal(first, run(5))
+    assert not np.array_equal(first, run(6))
+
+
+def test_ale_keywords_have_ale_pys_meanings():
+    """obs_type (rgb / grayscale / ram), max_num_frames_per_episode, render('rgb_array'),
+    ale.lives() / getRAM / get_action_meanings, and repeat_action_probability as STORI's
+    sticky type 1."""
+    import ale_py
+
+    from stori_jax.gym_adapter import ale_grayscale
+
+    gym.register_envs(ale_py)
+    env = gym.make("stori_jax:stori_ALE/Breakout-3.1-v5", render_mode="rgb_array", num_workers=0,
+                   max_num_frames_per_episode=8)
+    try:
+        assert env.unwrapped._frameskip == 4 and env.observation_space.shape == (210, 160, 3)
+        assert env.unwrapped.get_action_meanings() == \
+            gym.make("ALE/Breakout-v5").unwrapped.get_action_meanings()
+        obs, info = env.reset(seed=0)
+        np.testing.assert_array_equal(env.render(), obs)
+        np.testing.assert_array_equal(env.unwrapped.ale.getScreenGrayscale(), ale_grayscale(obs))
+        assert env.unwrapped.ale.lives() == info["lives"] == 5
+        np.testing.assert_array_equal(env.unwrapped.ale.getRAM(), info["ram"])
+        assert env.step(1)[3] is False and env.step(1)[3] is True  # truncated at frame 8
+        with pytest.raises(AttributeError, match=r"ale\.act: stori_jax's stand-in .* lives"):
+            env.unwrapped.ale.act(1)
+    finally:
+        env.close()
+    gray = gym.make("stori_ALE/Breakout-3.1-v5", obs_type="grayscale", num_workers=0)
+    ram = gym.make("stori_ALE/Breakout-3.1-v5", obs_type="ram", num_workers=0)
+    try:
+        assert gray.observation_space.shape == (210, 160) and ram.observation_space.shape == (128,)
+        assert gray.reset(seed=0)[0].shape == (210, 160)
+        obs, info = ram.reset(seed=0)
+        np.testing.assert_array_equal(obs, info["ram"])
+        with pytest.raises(RuntimeError, match=r"getScreenRGB\(\): this env observes 'ram'"):
+            ram.unwrapped.ale.getScreenRGB()
+    finally:
+        gray.close()
+        ram.close()
+    sticky = gym.make("stori_ALE/Breakout-3.1-v5", repeat_action_probability=0.25, obs_type="ram",
+                      num_workers=0)
+    try:
+        assert sticky.unwrapped._env.config.action_noise == stori_jax.ActionNoise(0.25,
+                                                                                  sticky=True)
+        sticky.reset(seed=0)
+        corrupted = [sticky.step(t % 4)[4]["action_corrupted"] for t in range(20)]
+        assert np.any(corrupted)  # repeats of the previous action, per emulator frame
+    finally:
+        sticky.close()
+
+
+@pytest.mark.parametrize("env_id, kwargs, pattern", [
+    ("stori_ALE/Breakout-1-v5", dict(repeat_action_probability=0.25),
+     r"repeat_action_probability=0\.25 .*: this preset already corrupts actions"),
+    ("stori_ALE/Breakout-3.1-v5", dict(repeat_action_probability=0.25, granularity="step"),
+     r"ALE repeats actions per emulator frame.*granularity 'step'"),
+    ("stori_ALE/Breakout-3.1-v5", dict(full_action_space=True),
+     r"full_action_space=True is not supported: stori_jax plays the game's minimal action set"),
+    ("stori_ALE/Breakout-3.1-v5", dict(mode=1), r"mode=1 is not supported"),
+    ("stori_ALE/Breakout-3.1-v5", dict(difficulty=1), r"difficulty=1 is not supported"),
+    ("stori_ALE/Breakout-3.1-v5", dict(continuous=True), r"continuous=True is not supported"),
+    ("stori_ALE/Breakout-3.1-v5", dict(sound_obs=True), r"sound_obs=True is not supported"),
+    ("stori_ALE/Breakout-3.1-v5", dict(frameskip=(2, 5)), r"frameskip: ale-py's stochastic"),
+    ("stori_ALE/Breakout-3.1-v5", dict(obs_type="rgbd"), r"obs_type must be one of"),
+    ("stori_ALE/Breakout-3.1-v5", dict(obs="raw"),
+     r"obs and ale-py's obs_type name the same setting of the ale-py-style id "
+     r"stori_ALE/Breakout-3\.1-v5: pass obs_type only"),
+    ("stori_jax/Breakout-3.1-v0", dict(frame_skip=1, frameskip=1),
+     r"frame_skip and ale-py's frameskip name the same setting of this env"),
+    ("stori_ALE/BreakoutNoFrameskip-3.1-v4", dict(obs_type="ram", render_mode="rgb_array"),
+     r"render_mode='rgb_array' needs the screens.*got obs_type='ram'"),
+])
+def test_ale_keywords_it_cannot_honour_are_refused_by_name(env_id, kwargs, pattern):
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # gymnasium's own warnings about render modes
+        with pytest.raises(ValueError, match=pattern):
+            gym.make(env_id, **kwargs)
+    with pytest.raises(ValueError, match="render_mode must be None or one of"):
+        StoriGymEnv("Breakout", "3.1", render_mode="human", obs="raw")
+
+
+def test_the_ale_style_ids_are_registered_beside_the_v0_ones():
+    from stori_jax.gym_adapter import ale_env_id
+
+    for game, name in stori_jax.list_presets():
+        for frameskip in (4, 1):
+            spec = gym.spec(ale_env_id(game, name, frameskip))
+            assert spec.kwargs["frameskip"] == frameskip and spec.kwargs["obs_type"] == "rgb"
+            assert spec.kwargs["repeat_action_probability"] == 0.0
+    assert gym.spec("stori_jax/Breakout-2.1-v0").kwargs.get("ale_style") is None
+
+
+def test_the_docs_gymnasium_recipes_run_as_written(monkeypatch):
+    """docs/drop-in.md's gymnasium recipes, as written: AtariPreprocessing over a NoFrameskip
+    id, and CleanRL's make_env over SB3's wrappers (the classes above stand in for
+    stable_baselines3, which is no dependency) in a SyncVectorEnv."""
+    import sys
+    import types
+    from pathlib import Path
+
+    text = (Path(__file__).parent.parent / "docs" / "drop-in.md").read_text()
+
+    def recipe(name):
+        after = text.split(f"<!-- recipe: {name} -->", 1)[1]
+        return after.split("```python\n", 1)[1].split("```", 1)[0]
+
+    wrappers = types.ModuleType("stable_baselines3.common.atari_wrappers")
+    for cls in (ClipRewardEnv, EpisodicLifeEnv, FireResetEnv, MaxAndSkipEnv, NoopResetEnv):
+        setattr(wrappers, cls.__name__, cls)
+    for name in ("stable_baselines3", "stable_baselines3.common"):
+        monkeypatch.setitem(sys.modules, name, types.ModuleType(name))
+    monkeypatch.setitem(sys.modules, "stable_baselines3.common.atari_wrappers", wrappers)
+    for name in ("gymnasium-atari-preprocessing", "gymnasium-cleanrl"):
+        ns = {}
+        exec(compile(recipe(name), "docs/drop-in.md", "exec"), ns)
+    assert ns["next_obs"].shape == (2, 4, 84, 84) and ns["envs"].closed
