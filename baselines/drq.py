@@ -38,7 +38,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
-import os
 import time
 from fractions import Fraction
 from pathlib import Path
@@ -499,11 +498,13 @@ def drop_replays(out: Path, keep: str | None) -> None:
 def make_env(config: DrQConfig):
     """The training envs: one batch of ``num_envs`` on seed :func:`train_env_seeds`, emulated
     by worker processes (one core left to the agent), so that the update runs while they
-    step.  The split over workers never changes the results."""
+    step (as many cores as :func:`baselines.runs.cores` allows: a grid trial's share of its
+    node).  The split over workers never changes the results."""
     import stori_jax
 
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    workers = max(1, min(config.num_envs, (cores or 2) - 1))
+    from baselines.runs import cores
+
+    workers = max(1, min(config.num_envs, cores() - 1))
     return stori_jax.make(config.game, config.preset, num_envs=config.num_envs,
                           seed=train_env_seeds(config.seed)[0], obs="atari84",
                           num_workers=workers, inline_envs=0)

@@ -1,6 +1,7 @@
 """The baselines as a stori-jax plugin (entry point ``stori_jax.plugins``, see
 :mod:`stori_jax.plugins`): the ``train``, ``eval`` and ``table`` commands, and the policy of
-any agent's checkpoint for ``stori-jax suite --checkpoint``."""
+any agent's checkpoint for ``stori-jax suite --checkpoint``; ``grid`` runs ``train`` and ``eval``
+over the paper's grid on Ray Tune."""
 
 from __future__ import annotations
 
@@ -9,8 +10,10 @@ from pathlib import Path
 
 def add_commands(subparsers) -> None:
     from baselines.commands import add_parsers
+    from baselines.grid import add_parser as add_grid_parser
 
     add_parsers(subparsers)
+    add_grid_parser(subparsers)  # grid: train + eval over games x presets x seeds on Ray Tune
 
 
 def trained_policy(path: Path):

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 import time
 from pathlib import Path
 from typing import NamedTuple
@@ -332,9 +331,11 @@ def make_envs(config: PPOConfig):
 
 
 def workers_per_half(half: int) -> int:
-    """Emulator workers of each half-batch of ``half`` envs: half the cores but one each."""
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return max(1, min(half, ((cores or 2) - 1) // 2))
+    """Emulator workers of each half-batch of ``half`` envs: half the cores but one each (the
+    cores :func:`baselines.runs.cores` allows: a grid trial's share of its node)."""
+    from baselines.runs import cores
+
+    return max(1, min(half, (cores() - 1) // 2))
 
 
 def collect(envs, act_fn, params, obs, key, num_steps: int, episodes: list, step0: int,

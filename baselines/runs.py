@@ -128,3 +128,40 @@ def write_summary(out: Path, summary: dict) -> None:
 
     if summary["finished"]:
         (Path(out) / "summary.json").write_text(json.dumps(summary, indent=1))
+
+
+# the cores a process's emulator workers may use, where fewer than its CPU affinity allows
+CORES_VARIABLE = "STORI_JAX_CORES"
+
+
+def cores() -> int:
+    """The cores this process's emulator workers may use: as many as its CPU affinity allows,
+    or fewer where the environment variable ``STORI_JAX_CORES`` says so.  ``stori-jax grid``
+    sets it in each trial to the CPUs Ray reserved for it: Ray counts CPUs but pins no process
+    to them, so a trial would otherwise start workers for every core of its node, in every
+    trial at once.  The split of envs over workers never changes the results."""
+    allowed = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
+        os.cpu_count() or 1)
+    capped = os.environ.get(CORES_VARIABLE)
+    if not capped:
+        return allowed
+    try:
+        budget = int(capped)
+    except ValueError:
+        raise ValueError(f"{CORES_VARIABLE} must be a whole number of cores, "
+                         f"got {capped!r}") from None
+    if budget < 1:
+        raise ValueError(f"{CORES_VARIABLE} must be >= 1, got {budget}")
+    return min(allowed, budget)
+
+
+def worker_split(num_envs: int) -> dict:
+    """``stori_jax.make``'s ``num_workers`` and ``inline_envs`` for a batch of ``num_envs``
+    under :func:`cores`: {} (make's own default, from the CPU affinity) unless
+    ``STORI_JAX_CORES`` caps the cores, and then make's default rule on that many."""
+    if not os.environ.get(CORES_VARIABLE):
+        return {}
+    from stori_jax.env import default_split
+
+    workers, inline = default_split(num_envs, cores())
+    return dict(num_workers=workers, inline_envs=inline)

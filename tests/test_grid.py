@@ -1,0 +1,284 @@
+"""``stori-jax grid`` on a local Ray: a grid of tiny trials ends with the complete table, a
+second run runs nothing again, a bad --set fails only its own trials, and a trial whose
+process is killed mid-run resumes from its Tune checkpoint and ends bit-identical to the same
+run made by ``stori-jax train`` + ``eval`` alone.  (The multi-node case: test_grid_cluster.py.)
+
+One local Ray serves the module (starting one costs seconds on 2 cores); each grid runs once
+in a fixture, its tests check what it left."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import pickle
+import shutil
+import signal
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from baselines import grid
+from baselines.commands import run_dir
+from stori_jax.cli import main
+
+ray = pytest.importorskip("ray", reason="the grid runs on Ray Tune (pip install -e '.[ray]')")
+tune = pytest.importorskip("ray.tune")
+
+TINY = ["network=tiny", "num_envs=4", "num_steps=8", "num_minibatches=2", "update_epochs=1"]
+STEPS = 96  # 3 iterations of 4 envs x 8 steps, trained in 3 parts
+EVAL = ["--eval-episodes", "1", "--max-episode-frames", "400"]  # episodes cut at 100 steps
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    """The grid's own local Ray (grid.connect(None)), two CPUs, for the module."""
+    assert grid.connect(None), "a Ray was already running in this process"
+    yield
+    ray.shutdown()
+
+
+def read_log(path: Path) -> list[dict]:
+    from baselines.ppo import TIMING_FIELDS
+
+    with open(path / "log.csv", newline="") as f:
+        return [{k: v for k, v in r.items() if k not in TIMING_FIELDS} for r in csv.DictReader(f)]
+
+
+def same_run(a: Path, b: Path) -> None:
+    """Two run folders hold the same training and evaluation, bit for bit (timings apart)."""
+    assert read_log(a) == read_log(b)
+    assert (a / "episodes.csv").read_text() == (b / "episodes.csv").read_text()
+    assert json.loads((a / "config.json").read_text()) == json.loads(
+        (b / "config.json").read_text())
+    ca, cb = (pickle.loads((p / "checkpoint.pkl").read_bytes()) for p in (a, b))
+    import jax
+
+    assert ca["iteration"] == cb["iteration"]
+    for x, y in zip(*(jax.tree.leaves((c["params"], c["opt_state"], c["key"], c["obs"]))
+                      for c in (ca, cb)), strict=True):
+        np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+    ea, eb = (json.loads((p / "eval-sampled.json").read_text()) for p in (a, b))
+    for key in ("returns", "lengths", "mean_return", "std_return", "eval_seed", "episodes",
+                "truncated", "agent_steps", "trained_agent_steps"):
+        assert ea[key] == eb[key], key
+
+
+# -- the random policy over presets x seeds ---------------------------------------------------
+
+@pytest.fixture(scope="module")
+def random_grid(local_ray, tmp_path_factory):
+    out = tmp_path_factory.mktemp("random-grid")
+    argv = ["grid", "--agent", "random", "--games", "Breakout", "--presets", "1", "3.1",
+            "--seeds", "0", "7", *EVAL, "--out", str(out), "--quiet"]
+    code = main(argv)
+    return out, argv, code
+
+
+def test_a_grid_ends_with_the_complete_table(random_grid, capsys):
+    out, _, code = random_grid
+    assert code == 0
+    table = json.loads((out / "table.json").read_text())
+    assert [(r["game"], r["preset"], r["Random"]["seeds"]) for r in table["rows"]] == [
+        ("Breakout", "1", [0, 7]), ("Breakout", "3.1", [0, 7])]
+    assert (out / "table.md").exists()
+    # each trial's file is where `stori-jax eval --random` files it, and what eval gives alone
+    from baselines.evaluate import evaluate
+
+    alone = evaluate("Breakout", "3.1", policy="random", episodes=1, seed=7,
+                     max_episode_frames=400, progress=False)
+    ran = json.loads((run_dir(out, "Breakout", "3.1", "random", 7) / "eval-random.json")
+                     .read_text())
+    for key in ("returns", "lengths", "mean_return", "eval_seed", "train_seed", "truncated"):
+        assert ran[key] == alone[key], key
+    assert json.loads((out / grid.SPEC_FILE).read_text())["runs"] == [
+        ["Breakout", "1", 0], ["Breakout", "1", 7], ["Breakout", "3.1", 0], ["Breakout", "3.1", 7]]
+
+
+def test_running_a_finished_grid_again_runs_nothing(random_grid, capsys):
+    out, argv, _ = random_grid
+    evals = sorted(out.rglob("eval-random.json"))
+    before = {p: p.stat().st_mtime_ns for p in evals}
+    results = sorted((out / grid.TUNE_DIR).rglob("result.json"))
+    reported = {p: p.read_text() for p in results}
+    capsys.readouterr()
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    assert "4 of 4 trials finished (resumed;" in printed
+    assert {p: p.stat().st_mtime_ns for p in evals} == before
+    assert {p: p.read_text() for p in results} == reported  # no trial reported anything
+
+
+def test_a_grid_of_other_settings_is_refused_in_a_grids_folder(random_grid, capsys):
+    out, argv, _ = random_grid
+    other = [a if a != "7" else "13" for a in argv]
+    assert main(other) == 2
+    err = capsys.readouterr().err
+    assert f"--out {out} holds a grid of other settings (runs" in err
+    assert "run the same command to resume it, or give another --out" in err
+
+
+# -- PPO: a bad --set, and a trial killed mid-run ---------------------------------------------
+
+class KillOnce(tune.Callback):
+    """Kills the process of a trial after it reported its first training part, and removes
+    its run folder (as a node's own disk would be lost): the retry must come from Tune's
+    checkpoint."""
+
+    def __init__(self):
+        self.killed, self.recovered = [], 0
+
+    def on_trial_result(self, iteration, trials, trial, result, **info):
+        if not self.killed and result.get("phase") == "train":
+            os.kill(result["pid"], signal.SIGKILL)
+            shutil.rmtree(result["run_dir"])
+            self.killed.append((result["run_dir"], result["agent_steps"]))
+
+    def on_trial_recover(self, iteration, trials, trial, **info):
+        self.recovered += 1
+
+
+@pytest.fixture(scope="module")
+def ppo_grid(local_ray, tmp_path_factory):
+    """PPO over Breakout 1 and Boxing 1 with action_head=factored, which only Boxing's 18
+    actions allow; Boxing's trial is killed after its first part."""
+    out = tmp_path_factory.mktemp("ppo-grid")
+    spec = grid.grid_spec("ppo", games=["Breakout", "Boxing"], presets=["1"], seeds=[0],
+                          steps=STEPS, eval_episodes=1, max_episode_frames=400,
+                          overrides=TINY + ["action_head=factored"], parts=3)
+    killer = KillOnce()
+    outcome = grid.run_grid(spec, out, max_failures=2, progress_bar=False, callbacks=[killer])
+    return out, outcome, killer
+
+
+def test_a_bad_set_fails_only_its_own_trials_with_its_message(ppo_grid, capsys):
+    out, outcome, _ = ppo_grid
+    assert list(outcome.finished) == ["Boxing 1 seed 0"]
+    assert outcome.failed == {
+        "Breakout 1 seed 0": "ValueError: action_head='factored' needs a game that plays ALE's "
+                             "full 18 actions (e.g. Boxing, BankHeist); Breakout has 4: use "
+                             "action_head='joint'"}
+    assert not run_dir(out, "Breakout", "1", "ppo", 0).exists()  # never started
+    assert grid.report_outcome(outcome, grid.grid_spec("ppo", games=["Breakout", "Boxing"],
+                                                       presets=["1"], seeds=[0], steps=STEPS),
+                               out) == 1
+    err = capsys.readouterr().err
+    assert err.count("action_head='factored' needs a game") == 1
+    assert json.loads((out / "table.json").read_text())["rows"][0]["PPO"]["seeds"] == [0]
+
+
+def test_a_killed_trial_resumes_from_its_checkpoint_bit_identical(ppo_grid, tmp_path):
+    out, outcome, killer = ppo_grid
+    run = run_dir(out, "Boxing", "1", "ppo", 0)
+    assert killer.killed == [(str(run), 32)] and killer.recovered == 1
+    # the same run by `stori-jax train` and `eval` alone
+    alone = tmp_path / "alone"
+    assert main(["train", "ppo", "--game", "Boxing", "--preset", "1", "--seed", "0",
+                 "--steps", str(STEPS), *[a for item in TINY + ["action_head=factored"]
+                                                for a in ("--set", item)],
+                 "--out", str(alone), "--quiet"]) == 0
+    assert main(["eval", "--checkpoint", str(alone / "checkpoint.pkl"), "--episodes", "1",
+                 "--max-episode-frames", "400", "--quiet"]) == 0
+    same_run(run, alone)
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["finished"] and summary["agent_steps"] == STEPS
+    assert outcome.finished["Boxing 1 seed 0"]["eval_mean_return"] == json.loads(
+        (alone / "eval-sampled.json").read_text())["mean_return"]
+
+
+# -- without Ray, and what is checked before Ray starts ---------------------------------
+
+def test_without_ray_the_command_says_how_to_install_it(monkeypatch, tmp_path, capsys):
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
+    monkeypatch.setitem(sys.modules, "ray.tune", None)
+    assert main(["grid", "--agent", "random", "--out", str(tmp_path / "g")]) == 2
+    err = capsys.readouterr().err
+    assert 'pip install -e ".[ray]"' in err and "Ray Tune" in err
+    assert not (tmp_path / "g").exists()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--agent", "ppo", "--set", "nonsense=1"], "no trial of the grid can run: unknown PPO "
+                                                "hyperparameter 'nonsense'"),
+    (["--agent", "random", "--steps", "10"], "--steps: the random policy is not trained"),
+    (["--agent", "random", "--set", "network=tiny"], "--set: the random policy has no "
+                                                     "hyperparameters"),
+    (["--agent", "random", "--seeds", "0", "0"], "--seeds gives [0] more than once"),
+    (["--agent", "random", "--presets", "9.9"], "--presets: unknown ['9.9']"),
+    (["--agent", "random", "--eval-episodes", "0"], "--eval-episodes must be >= 1"),
+    (["--agent", "random", "--cpus-per-run", "0"], "--cpus-per-run must be > 0"),
+])
+def test_what_cannot_run_is_refused_before_ray_starts(argv, message, tmp_path, capsys,
+                                                      monkeypatch):
+    monkeypatch.setattr(grid, "connect", lambda address: pytest.fail("Ray started"))
+    assert main(["grid", *argv, "--out", str(tmp_path / "g"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("stori-jax: error") == 1
+
+
+def test_a_folder_that_is_no_grid_is_refused(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(grid, "connect", lambda address: pytest.fail("Ray started"))
+    (tmp_path / "Breakout-1").mkdir()
+    assert main(["grid", "--agent", "random", "--out", str(tmp_path), "--quiet"]) == 2
+    assert "holds files but no grid.json: not a grid's folder" in capsys.readouterr().err
+
+
+# -- the pieces -------------------------------------------------------------------------------
+
+def test_parts_are_whole_iterations_as_even_as_they_go():
+    assert grid.part_bounds(98, 4) == [25, 49, 74, 98]
+    assert grid.part_bounds(3, 3) == [1, 2, 3]
+    assert grid.part_bounds(2, 4) == [1, 2]  # no more parts than iterations
+    assert grid.progress(49, [25, 49, 74, 98]) == 2 / 5
+
+
+def test_a_run_folder_behind_its_tune_checkpoint_is_restored_from_it(ppo_grid, tmp_path):
+    """The archive replaces a folder that lost its files or holds a damaged checkpoint; a
+    folder as far as the archive (shared storage) is kept as it is."""
+    from baselines.agents import get_agent
+
+    agent = get_agent("ppo")
+    run = tmp_path / "run"
+    shutil.copytree(run_dir(ppo_grid[0], "Boxing", "1", "ppo", 0), run)
+    saved = tmp_path / "ckpt"
+    saved.mkdir()
+    grid.archive_run(run, saved, agent_steps=STEPS, per_iteration=32)
+    files = {p.name: p.read_bytes() for p in run.iterdir()}
+    assert not grid.restore_run(run, saved, agent)  # as far: kept
+    shutil.rmtree(run)  # the folder is lost: rebuilt from the archive
+    assert grid.restore_run(run, saved, agent)
+    assert {p.name: p.read_bytes() for p in run.iterdir()} == files
+    (run / "checkpoint.pkl").write_bytes(b"junk")  # a damaged checkpoint is replaced too
+    assert grid.trained_iterations(run, agent, 32) == -1
+    assert grid.restore_run(run, saved, agent)
+    assert grid.trained_iterations(run, agent, 32) == 3
+
+
+def test_the_cores_of_a_trial_cap_its_emulator_workers(monkeypatch):
+    from baselines import ppo, runs
+
+    monkeypatch.delenv(runs.CORES_VARIABLE, raising=False)
+    assert runs.worker_split(20) == {}  # make's own default
+    monkeypatch.setenv(runs.CORES_VARIABLE, "1")
+    assert runs.cores() == 1
+    assert runs.worker_split(20) == dict(num_workers=1, inline_envs=0)
+    assert ppo.workers_per_half(8) == 1
+    monkeypatch.setenv(runs.CORES_VARIABLE, "10000")  # never more than the affinity allows
+    assert runs.cores() == len(os.sched_getaffinity(0))
+    monkeypatch.setenv(runs.CORES_VARIABLE, "two")
+    with pytest.raises(ValueError, match="STORI_JAX_CORES must be a whole number of cores"):
+        runs.cores()
+
+
+def test_an_evaluation_already_there_is_reused_only_if_it_is_the_one_asked_for(tmp_path):
+    path = tmp_path / "eval-random.json"
+    wanted = dict(game="Breakout", preset="1", policy="random", train_seed=0, episodes=2,
+                  max_episode_frames=400)
+    assert grid.reusable_result(path, wanted, None) is None
+    path.write_text(json.dumps(dict(wanted, mean_return=1.0)))
+    assert grid.reusable_result(path, wanted, None)["mean_return"] == 1.0
+    with pytest.raises(ValueError, match=r"holds another evaluation \(episodes 2 there, 5 "
+                                         r"here\): move it away"):
+        grid.reusable_result(path, dict(wanted, episodes=5), None)
