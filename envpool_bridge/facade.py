@@ -207,7 +207,11 @@ def _stori_make_kwargs(game: str, preset: str | None, settings: dict) -> tuple[d
                              f"game's default {name} (the presets are defined on it); leave it -1")
     frame_skip = check_int("frame_skip", settings["frame_skip"], 1)
     steps = check_int("max_episode_steps", settings["max_episode_steps"], 1)
-    noop_max = check_int("noop_max", settings["noop_max"], 1, MAX_INT32)
+    noop_max = check_int("noop_max", settings["noop_max"])
+    if not 1 <= noop_max <= MAX_INT32:
+        raise ValueError(f"noop_max must be in [1, {MAX_INT32}] (envpool draws 1..noop_max NOOP "
+                         f"frames at a reset; noop_max=1 starts every episode alike), got "
+                         f"{noop_max}")
     config = settings.get("config")
     if config is not None and preset is not None:
         raise ValueError(f"config: the task id names preset {preset!r}; pass config= with a "
@@ -297,12 +301,12 @@ class StoriEnvPool:
     """A batch of STORI envs with envpool's Python API (``env_type="gym"``)."""
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+    _gym_api = True  # envpool < 1.0's gym API: reset -> obs, step -> (obs, reward, done, info)
 
     def __init__(self, task_id: str, game: str, preset: str | None, settings: dict):
         import stori_jax
 
         make_kwargs, self._obs_kind, self._stack = _stori_make_kwargs(game, preset, settings)
-        self._gym_api = not isinstance(self, VectorEnv)
         self._episodic_life = bool(settings["episodic_life"])
         self._reward_clip = bool(settings["reward_clip"])
         self._reset_info = bool(settings["gym_reset_return_info"])
@@ -544,3 +548,5 @@ class StoriEnvPool:
 class StoriGymnasiumEnvPool(StoriEnvPool, VectorEnv):
     """``env_type="gymnasium"``: envpool's gymnasium API (a gymnasium VectorEnv, next-step
     autoreset)."""
+
+    _gym_api = False

@@ -156,7 +156,9 @@ def take_ale_keywords(kwargs: dict, ale_style: bool, id_name: str | None = None)
         kwargs["frame_skip"] = check_int("frameskip", frameskip, 1)
     if "max_num_frames_per_episode" in kwargs:
         frames = kwargs.pop("max_num_frames_per_episode")
-        kwargs["max_episode_frames"] = NO_CAP if frames is None or frames == 0 else             check_int("max_num_frames_per_episode", frames, 1, NO_CAP)
+        capped = frames is not None and frames != 0  # ALE: 0 is no cap
+        kwargs["max_episode_frames"] = (check_int("max_num_frames_per_episode", frames, 1, NO_CAP)
+                                        if capped else NO_CAP)
     out["repeat_action_probability"] = check_probability(
         "repeat_action_probability", kwargs.pop("repeat_action_probability", 0.0))
     for name, why in (("full_action_space", "stori_jax plays the game's minimal action set "
