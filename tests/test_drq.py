@@ -98,23 +98,22 @@ def test_double_dqn_targets_and_the_huber_loss_by_hand():
 
 
 def test_augmentation_keeps_shapes_and_dtypes_and_is_the_identity_at_pad_0():
-    obs = jax.random.randint(jax.random.PRNGKey(0), (16, 84, 84, 4), 0, 256).astype(jnp.float32)
+    obs = jax.random.randint(jax.random.PRNGKey(0), (16, 84, 84, 4), 1, 256).astype(jnp.float32)
     key = jax.random.PRNGKey(1)
     augment = jax.jit(drq.augment, static_argnums=(2, 3))
     out = augment(obs, key, 4, 0.05)
     assert out.shape == obs.shape and out.dtype == obs.dtype
-    np.testing.assert_array_equal(augment(obs, key, 0, 0.0), obs)
-    # intensity alone: one factor per sample in [1 - 2 scale, 1 + 2 scale]
-    factor = np.asarray(augment(obs + 1, key, 0, 0.05) / (obs + 1))
-    per_sample = factor.reshape(16, -1)
-    np.testing.assert_allclose(per_sample, per_sample[:, :1] * np.ones_like(per_sample), rtol=1e-6)
-    assert np.all(np.abs(per_sample[:, 0] - 1) <= 0.1 + 1e-6) and np.ptp(per_sample[:, 0]) > 0
+    np.testing.assert_array_equal(drq.augment(obs, key, 0, 0.0), obs)
     # the shift alone: each sample a crop of its own edge-padded stack
     shifted = np.asarray(augment(obs, key, 4, 0.0))
     padded = np.pad(np.asarray(obs), ((0, 0), (4, 4), (4, 4), (0, 0)), mode="edge")
     for frame, crop in zip(padded, shifted):
         assert any(np.array_equal(frame[i:i + 84, j:j + 84], crop)
                    for i in range(9) for j in range(9))
+    # then the intensity: one factor per sample in [1 - 2 scale, 1 + 2 scale]
+    factor = (np.asarray(out) / shifted).reshape(16, -1)
+    np.testing.assert_allclose(factor, factor[:, :1] * np.ones_like(factor), rtol=1e-6)
+    assert np.all(np.abs(factor[:, 0] - 1) <= 0.1 + 1e-6) and np.ptp(factor[:, 0]) > 0
 
 
 # -- replay ---------------------------------------------------------------------------------------
@@ -340,7 +339,8 @@ def test_resume_reproduces_the_uninterrupted_run(uninterrupted, tmp_path):
 
 def test_train_eval_and_table_through_the_commands(uninterrupted, tmp_path, capsys):
     """stori-jax train drq (the fixture's run, through the command line), eval of its
-    checkpoint (ε-greedy with ε 0.001), and a table with a DrQ(ε) column beside PPO's."""
+    checkpoint (ε-greedy with ε 0.001), a table with a DrQ(ε) column beside PPO's, and suite
+    --checkpoint on eval's seed."""
     run = tmp_path / "Breakout-1" / "drq-seed0"
     sets = [f"--set={k}={v}" for k, v in TINY.items()
             if k not in ("game", "preset", "total_steps")]
@@ -365,6 +365,11 @@ def test_train_eval_and_table_through_the_commands(uninterrupted, tmp_path, caps
     assert row.startswith(f"| Breakout | 1 | 2.00 (1 seed) | {result['mean_return']:.2f} (1 seed)"
                           " | - |")
     assert (tmp_path / "table" / "curves-Breakout.png").exists()
+    assert main(["suite", "--checkpoint", str(run / "checkpoint.pkl"), "--presets", "1",
+                 "--episodes", "1", "--num-envs", "1", "--max-steps", "10", "--no-gallery",
+                 "--quiet", "--out", str(tmp_path / "suite")]) == 0
+    suite = json.loads((tmp_path / "suite" / "results.json").read_text())
+    assert suite["seed"] == 10_000 and [r["agent_steps"] for r in suite["rows"]] == [10]
 
 
 def test_a_drq_checkpoint_acts_epsilon_greedy_or_greedy(uninterrupted):
