@@ -26,6 +26,7 @@ import csv
 import dataclasses
 import io
 import json
+import logging
 import math
 import os
 import sys
@@ -544,8 +545,6 @@ def connect(address: str | None) -> bool:
     cluster at ``address`` (``auto``, ``HOST:PORT``, or ``ray://HOST:PORT`` as a Ray Client,
     which hears its task's output).  Returns whether Ray was started or connected here (and is
     to be shut down); a Ray already initialised in this process is used as it is."""
-    import logging
-
     import ray
 
     if ray.is_initialized():
@@ -646,6 +645,9 @@ def run_grid(spec: GridSpec, out: Path, *, address: str | None = None,
     started_ray = connect(address)
     session = GridProgress(out, len(trials), progress_bar)
     _SESSION = session
+    # restoring after a stop, Tune warns of each trial that had reported nothing yet: the
+    # outcome says which trials are unfinished
+    logging.getLogger("ray.tune.analysis.experiment_analysis").setLevel(logging.ERROR)
     try:
         trainable = tune.with_resources(tune_trial, {"cpu": cpus_per_run, "gpu": gpus_per_run})
         restoring = tune.Tuner.can_restore(str(experiment))
@@ -674,18 +676,19 @@ def run_grid(spec: GridSpec, out: Path, *, address: str | None = None,
             import ray
 
             ray.shutdown()
-    finished, failed, unfinished = {}, dict(invalid), []
+    finished, failed = {}, dict(invalid)
     for result in results:
-        name = label(result.config["trial"])
-        metrics = result.metrics or {}
+        trial = (result.config or {}).get("trial")  # None: a trial stopped before it started
+        if trial is None:
+            continue
+        name, metrics = label(trial), result.metrics or {}
         if result.error is not None:
             failed[name] = _error_line(result.error)
         elif metrics.get("error"):
             failed[name] = metrics["error"]
         elif metrics.get("phase") == "done":
             finished[name] = metrics
-        else:
-            unfinished.append(name)
+    unfinished = [label(t) for t in trials if label(t) not in finished | failed]
     table, table_error = None, None
     with contextlib.redirect_stderr(io.StringIO()) as notes:
         try:
