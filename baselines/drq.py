@@ -185,6 +185,17 @@ def epsilon_at(config: DrQConfig, step: int) -> float:
     return config.epsilon_end + min(max(bonus, 0.0), 1.0 - config.epsilon_end)
 
 
+def learner_ends(terminated, truncated, lives_before, lives_now, terminal_on_life_loss: bool):
+    """(done, cut) of a step, each (B,) bool: ``done`` where the learner's episode ended (the
+    game's end, or a life lost while the game goes on), ``cut`` where the frame cap cut the
+    game off.  At an episode's end the env's lives are the next episode's already, so a life
+    lost on the very step the cap cuts the game is not counted (the cut ends the return)."""
+    terminated, truncated = np.asarray(terminated), np.asarray(truncated)
+    ended = terminated | truncated
+    life_lost = ~ended & (np.asarray(lives_now) < np.asarray(lives_before))
+    return terminated | (terminal_on_life_loss & life_lost), truncated & ~terminated
+
+
 def updates_due(config: DrQConfig, transitions: int) -> int:
     """Gradient updates done once the replay holds ``transitions``: ``replay_ratio`` per
     transition past ``learning_starts`` (and past the first full sample of every env)."""
@@ -611,12 +622,11 @@ def train(config: DrQConfig, out: Path, *, resume: bool = False, progress: bool 
                 pending["metrics"].append(sums)
                 pending["updates"] += num_updates
             next_obs, reward, terminated, truncated, info = env.recv()
-            terminated, truncated = np.asarray(terminated), np.asarray(truncated)
-            ended = terminated | truncated
             now = np.asarray(info["lives"])
-            done = terminated | (config.terminal_on_life_loss & ~ended & (now < lives))
-            buffer_state = m.add(buffer_state, obs, actions, reward, first, done,
-                                 truncated & ~terminated)
+            done, cut = learner_ends(terminated, truncated, lives, now,
+                                     config.terminal_on_life_loss)
+            ended = np.asarray(terminated) | np.asarray(truncated)
+            buffer_state = m.add(buffer_state, obs, actions, reward, first, done, cut)
             obs, lives, first = next_obs, now, ended
             step += e
             if ended.any():

@@ -230,6 +230,17 @@ def test_an_update_lowers_the_td_loss_on_a_fixed_batch_and_copies_the_target():
     assert same(state.target_params, state.params)
 
 
+def test_a_lost_life_ends_the_learners_episode_and_the_game_goes_on():
+    terminated = np.array([False, False, True, False, False])
+    truncated = np.array([False, False, False, True, False])
+    before, now = np.array([5, 5, 1, 3, 0]), np.array([5, 4, 5, 5, 0])  # an end: the next's
+    done, cut = drq.learner_ends(terminated, truncated, before, now, True)
+    np.testing.assert_array_equal(done, [False, True, True, False, False])
+    np.testing.assert_array_equal(cut, [False, False, False, True, False])
+    done, _ = drq.learner_ends(terminated, truncated, before, now, False)
+    np.testing.assert_array_equal(done, [False, False, True, False, False])
+
+
 def test_epsilon_and_the_updates_follow_the_step_count():
     config = drq.DrQConfig()
     assert [drq.epsilon_at(config, s) for s in (0, 1600)] == [1.0, 1.0]
@@ -327,6 +338,11 @@ def test_resume_reproduces_the_uninterrupted_run(uninterrupted, tmp_path):
     assert sorted(p.name for p in tmp_path.glob("replay-*.pkl")) == ["replay-23.pkl"]
     drq.train(tiny(), tmp_path, resume=True, progress=False, stop_after=41)
     assert sorted(p.name for p in tmp_path.glob("replay-*.pkl")) == ["replay-41.pkl"]
+    with open(tmp_path / "replay-41.pkl", "rb") as f:
+        rows = pickle.load(f)["experience"]
+    assert rows["frame"].shape == (2, 41, 84, 84)  # the rows written so far, one per step
+    # Breakout's lost lives end the learner's episodes, not the env's
+    assert rows["done"].sum() > rows["first"][:, 1:].sum() + rows["cut"].sum()
     assert drq.train(tiny(), tmp_path, resume=True, progress=False)["iterations_now"] == 19
     assert not list(tmp_path.glob("replay-*.pkl"))
     assert read_log(tmp_path) == read_log(full)
