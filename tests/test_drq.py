@@ -401,3 +401,38 @@ def test_a_drq_checkpoint_acts_epsilon_greedy_or_greedy(uninterrupted):
                                                      run_total_steps=120, run_finished=True)
     with pytest.raises(ValueError, match="not a stori-jax DrQ checkpoint"):
         drq.check_checkpoint(dict(ckpt, format="stori-jax-ppo-1"), full / "checkpoint.pkl")
+
+
+def test_a_table_of_two_agents_has_a_column_and_a_row_of_curves_each(tmp_path, monkeypatch):
+    """A PPO run and a DrQ(ε) run of one seed are two agents' runs, not one seed twice; each
+    agent gets its column (PPO first), its row of panels, and notes that name it."""
+    import dataclasses
+
+    import matplotlib.pyplot as plt
+
+    from baselines.evaluate import write_result
+
+    configs = dict(ppo=dict(game="Boxing", preset="1", seed=0),
+                   drq=dataclasses.asdict(drq.DrQConfig(game="Boxing", preset="1", seed=0)))
+    for agent, config in configs.items():
+        for seed in (0, 7):
+            run = tmp_path / "Boxing-1" / f"{agent}-seed{seed}"
+            run.mkdir(parents=True)
+            (run / "config.json").write_text(json.dumps(dict(config, seed=seed)))
+            (run / "episodes.csv").write_text("global_step,env,return,length\n100,0,1.0,5\n")
+            if (agent, seed) != ("drq", 7):
+                write_result(dict(game="Boxing", preset="1", agent=agent, policy="sampled",
+                                  train_seed=seed, mean_return=1.0 + seed, episodes=3), run)
+    figures, close = [], plt.close
+    monkeypatch.setattr(plt, "close", figures.append)
+    text, _ = build_table(tmp_path, tmp_path / "out")
+    assert text.splitlines()[0] == ("| game | preset | PPO (ours) | DrQ(ε) (ours) | Random (ours) "
+                                    "| DreamerV3 (paper) | STORM (paper) | seeds (PPO) | "
+                                    "episodes per seed |")
+    assert text.splitlines()[2] == ("| Boxing | 1 | 4.50 ± 4.95 | 1.00 (1 seed) | - | 39.32 ± 6.79 "
+                                    "| 29.48 ± 15.41 | 0, 7; DrQ(ε): 0 | 3 |")
+    assert [ax.get_title() for ax in figures[0].axes] == ["PPO: Boxing 1", "DrQ(ε): Boxing 1"]
+    close(figures[0])
+    notes = json.loads((tmp_path / "out" / "table.json").read_text())["notes"]
+    assert notes[0] == ("Boxing 1 DrQ(ε): seed(s) [7] have no eval-sampled.json: in the curves, "
+                        "not in the table")
