@@ -18,6 +18,7 @@ from baselines import drq
 from baselines.table import build_table
 from stori_jax.cli import main
 
+transitions = jax.jit(drq.n_step_transitions, static_argnums=(1, 2))  # one compilation
 TINY = dict(game="Breakout", preset="1", network="tiny", num_envs=2, total_steps=120,
             learning_starts=40, batch_size=8, n_step=3, buffer_size=400, log_every=30,
             checkpoint_every=40)
@@ -49,7 +50,7 @@ def test_n_step_returns_stop_at_the_learners_terminal_by_hand():
     reward = [[1, 2, 3], [1, 2, 3], [1, 2, 3], [5, 0, 0], [1, 1, 1]]
     done = [[0, 0, 0], [0, 1, 0], [1, 0, 1], [0, 0, 0], [0, 0, 1]]
     cut = [[0, 0, 0], [0, 0, 0], [0, 0, 0], [0, 1, 0], [0, 0, 0]]
-    t = drq.n_step_transitions(sequences(reward, done, cut), 3, g)
+    t = transitions(sequences(reward, done, cut), 3, g)
     np.testing.assert_allclose(t.ret, [1 + g * 2 + g * g * 3, 1 + g * 2, 1, 5 + 0, 1 + g + g * g],
                                rtol=1e-6)
     np.testing.assert_allclose(t.discount, [g ** 3, 0, 0, 0, 0], rtol=1e-6)
@@ -61,12 +62,12 @@ def test_n_step_returns_stop_at_the_learners_terminal_by_hand():
 
 
 def test_a_stack_repeats_its_episodes_first_frame_as_the_env_fills_it():
-    first = np.zeros((3, 7), bool)
+    first = np.zeros((3, 7), bool)  # (and two rows without a start, as the test above)
     first[1, 2] = True   # the episode began one row before the transition's
     first[2, 3] = True   # ... on the transition's row
-    t = drq.n_step_transitions(sequences(np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3)),
-                                         first), 3, 0.9)
-    np.testing.assert_array_equal(t.obs[:, 0, 0], [[0, 1, 2, 3], [2, 2, 2, 3], [3, 3, 3, 3]])
+    t = transitions(sequences(np.zeros((5, 3)), np.zeros((5, 3)), np.zeros((5, 3)),
+                              np.pad(first, ((0, 2), (0, 0)))), 3, 0.9)
+    np.testing.assert_array_equal(t.obs[:3, 0, 0], [[0, 1, 2, 3], [2, 2, 2, 3], [3, 3, 3, 3]])
 
 
 def table_q(params, obs):
@@ -89,12 +90,13 @@ def test_double_dqn_targets_and_the_huber_loss_by_hand():
                         for r, d, s in zip([1.0, -0.5, 0.0], [0.9, 0.9, 0.0], [3, 4, 5])]
     errors = np.array([on[s, a] for s, a in zip([0, 1, 2], [0, 2, 1])]) - expected_targets
     huber = np.where(np.abs(errors) <= 1, 0.5 * errors ** 2, np.abs(errors) - 0.5)
-    loss, metrics = drq.td_loss(table_q, online, target, batch, shared_target=False)
-    np.testing.assert_allclose(loss, huber.mean(), rtol=1e-5)  # the invalid one left out
-    grads = jax.grad(lambda p: drq.td_loss(table_q, p, target, batch, False)[0])(online)
+    loss = jax.jit(lambda p, t, shared: drq.td_loss(table_q, p, t, batch, shared)[0],
+                   static_argnums=2)
+    np.testing.assert_allclose(loss(online, target, False), huber.mean(), rtol=1e-5)  # the
+    #                                                            invalid one left out
+    grads = jax.jit(jax.grad(lambda p: drq.td_loss(table_q, p, target, batch, False)[0]))(online)
     assert np.count_nonzero(np.asarray(grads)) == 3, "only the taken Q-values of valid rows"
-    shared = drq.td_loss(table_q, online, online, batch, shared_target=True)[0]
-    np.testing.assert_allclose(shared, drq.td_loss(table_q, online, online, batch, False)[0])
+    np.testing.assert_allclose(loss(online, online, True), loss(online, online, False))
 
 
 def test_augmentation_keeps_shapes_and_dtypes_and_is_the_identity_at_pad_0():
