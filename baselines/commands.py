@@ -11,7 +11,7 @@ from pathlib import Path
 
 from baselines.agents import agent_names, get_agent, load_checkpoint
 from baselines.evaluate import CHECKPOINT_POLICIES, EVAL_NUM_ENVS
-from stori_jax.env import MAX_EPISODE_FRAMES
+from stori_jax.builder import MAX_EPISODE_FRAMES
 
 
 def add_parsers(sub) -> None:
@@ -224,7 +224,7 @@ def cmd_eval(args) -> int:
                                     write_result)
     from stori_jax.checks import MAX_INT32, MAX_SEED, check_int
     from stori_jax.cli import check_out
-    from stori_jax.env import FRAME_SKIP, check_memory
+    from stori_jax.builder import FRAME_SKIP, check_memory
     from stori_jax.presets import canonical_preset
 
     if args.random == (args.checkpoint is not None):

@@ -321,7 +321,7 @@ def make_envs(config: PPOConfig):
     chooses actions meanwhile), one core of the machine left for the agent; seeds
     :func:`train_env_seeds`.  The split over workers never changes the results."""
     import stori_jax
-    from stori_jax.env import FRAME_SKIP, check_memory
+    from stori_jax.builder import FRAME_SKIP, check_memory
 
     check_memory(config.num_envs, FRAME_SKIP)  # both halves: named by the whole batch
     half = config.num_envs // 2

@@ -20,7 +20,7 @@ def fits_in_memory(parser: argparse.ArgumentParser, flag: str, sizes: list[int])
     """Every batch size in ``sizes`` fits this machine's memory (stori_jax's check of make()),
     checked before anything is measured: a typo of a size otherwise allocated for minutes or
     hung building emulators."""
-    from stori_jax.env import FRAME_SKIP, check_memory
+    from stori_jax.builder import FRAME_SKIP, check_memory
 
     try:
         check_memory(max(sizes), FRAME_SKIP, flag=flag)

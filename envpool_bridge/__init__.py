@@ -35,11 +35,13 @@ possible starts).  With the default ``noop_max=0`` every episode starts one fram
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from stori_jax.backends.interrupts import interrupts_deferred
 from stori_jax.backends.layout import SCREEN, buffer_specs
-from stori_jax.backends.subproc import EnvClosedError
+from stori_jax.errors import EnvClosedError
 
 FRAMES_LAYOUT = "pooled_chw"  # (B, 3, 210, 160): envpool's max-pooled screen, channels first
 MIN_ENVPOOL_MAJOR = 1  # pyproject's envpool>=1.0: older ones have no info['ram']
@@ -78,9 +80,14 @@ def make_envpool_backend(plan, seed: int, max_episode_frames: int) -> "EnvpoolBa
 
 
 class EnvpoolBackend:
-    """Adapts an envpool gymnasium-style pool to the backend protocol of ``stori_jax.Env``."""
+    """Adapts an envpool gymnasium-style pool to the backend protocol of ``stori_jax.Env``
+    (:class:`stori_jax.backends.protocol.Backend`)."""
 
+    name = "envpool"
     frames_layout = FRAMES_LAYOUT
+    can_time_out = False  # the pool's wait is C++: it cannot be bounded
+    can_snapshot = False  # envpool cannot clone its emulators' states
+    half_stepped = False  # a step is never interrupted half way (Ctrl-C waits for the pool)
 
     def __init__(self, plan, seed: int, max_episode_frames: int):
         try:
@@ -120,6 +127,7 @@ class EnvpoolBackend:
         self._running_length = np.zeros(b, np.int64)
         self._pending = None  # the command the pool has and whose result is not yet taken
         self._closed = False
+        self._owner_pid = os.getpid()  # the pool's threads serve this process only
 
     @property
     def closed(self) -> bool:
@@ -201,8 +209,21 @@ class EnvpoolBackend:
         v["episode_length"][...] = np.where(done, self._running_length, 0)
         return v
 
+    def snapshot(self) -> list[dict]:
+        raise ValueError("backend EnvpoolBackend cannot snapshot its emulators; use "
+                         "backend='subproc'")
+
+    def restore_differences(self, states: list[dict]) -> list[str]:
+        raise ValueError("backend EnvpoolBackend cannot restore emulators; use "
+                         "backend='subproc'")
+
+    restore = restore_differences
+
     def close(self) -> None:
+        """Close the pool; in a process forked from its owner, leave it to the owner (its
+        threads are the owner's)."""
         if not self._closed:
             self._closed = True
-            self.pool.close()
+            if os.getpid() == self._owner_pid:
+                self.pool.close()
 from envpool_bridge.facade import make  # noqa: E402,F401 - envpool.make over stori_jax (docs/drop-in.md)

@@ -18,15 +18,18 @@ from stori_jax.presets import describe_preset, list_presets, preset  # noqa: F40
 __version__ = "0.1.0"
 
 _LAZY = {
-    "make": ("stori_jax.env", "make"),
+    "make": ("stori_jax.builder", "make"),
     "Env": ("stori_jax.env", "Env"),
     "rollout": ("stori_jax.rollout", "rollout"),
     "agent_key": ("stori_jax.core", "agent_key"),
     "Trajectory": ("stori_jax.rollout", "Trajectory"),
     "XlaHandle": ("stori_jax.xla", "XlaHandle"),
-    "WorkerError": ("stori_jax.backends.subproc", "WorkerError"),
-    "EnvClosedError": ("stori_jax.backends.subproc", "EnvClosedError"),
-    "InterruptedStepError": ("stori_jax.backends.subproc", "InterruptedStepError"),
+    "WorkerError": ("stori_jax.errors", "WorkerError"),
+    "EnvClosedError": ("stori_jax.errors", "EnvClosedError"),
+    "InterruptedStepError": ("stori_jax.errors", "InterruptedStepError"),
+    "ConcurrentUseError": ("stori_jax.errors", "ConcurrentUseError"),
+    "EnvStateError": ("stori_jax.errors", "EnvStateError"),
+    "Phase": ("stori_jax.env", "Phase"),
     "functional": ("stori_jax.functional", None),
     "metrics": ("stori_jax.metrics", None),
 }

@@ -141,7 +141,7 @@ def selected_presets(games, presets):
 
 
 def _cmd_suite(args) -> int:
-    from stori_jax.env import FRAME_SKIP, check_memory
+    from stori_jax.builder import FRAME_SKIP, check_memory
     from stori_jax.suite import default_out, run_suite
 
     for name, value in (("--episodes", args.episodes), ("--num-envs", args.num_envs),

@@ -139,7 +139,7 @@ AFTER_SWITCH = 100  # agent steps a 2.2 picture plays past T by default
 def episode_step_cap() -> int:
     """Agent steps an episode of a picture's envs (make's frame cap and frame skip) lasts at
     most: concept 2 of a T at or past it never comes."""
-    from stori_jax.env import FRAME_SKIP, MAX_EPISODE_FRAMES
+    from stori_jax.builder import FRAME_SKIP, MAX_EPISODE_FRAMES
 
     return -(-MAX_EPISODE_FRAMES // FRAME_SKIP)
 

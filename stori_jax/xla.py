@@ -141,7 +141,7 @@ def _weak_callback(method):
     def callback(*args):
         bound = ref()
         if bound is None:
-            from stori_jax.backends.subproc import EnvClosedError
+            from stori_jax.errors import EnvClosedError
 
             raise marked(EnvClosedError("the environment of this xla() step was garbage "
                                         "collected (its workers are closed); keep the env "

@@ -1,15 +1,16 @@
 """The docs' examples run as written, and every command line they show is one its command
 accepts.
 
-- README.md's python block, run verbatim after a prologue that supplies the names it leaves to
-  the reader (``actions``, ``policy_fn``, ``params``); its comments' lists of ``info`` keys and
-  ``env`` attributes are checked against what the env has.
-- docs/port-your-stori-config.md's python block, run verbatim (its asserts check what it says).
-- Every ``stori-jax SUBCOMMAND ...`` line in a bash block or in backticks of README.md,
-  baselines/README.md, benchmarks/README.md and docs/*.md: the subcommand exists, each
-  ``--flag`` is one of its options (spelt in full: argparse would take an abbreviation), the
-  line parses, and its ``--set FIELD=VALUE`` make a valid ``PPOConfig``.  Likewise the lines
-  that run a script (``python benchmarks/throughput.py --quick``, ``xla_rollout.py --sizes 8``),
+- Every ```python block of README.md, docs/*.md, baselines/README.md and benchmarks/README.md
+  runs verbatim in a fresh namespace (in a temporary working directory), except a block right
+  after a ``<!-- not run: why -->`` line, or a ``<!-- recipe: name -->`` line (docs/drop-in.md's
+  recipes, run by their own tests with the wrapper packages they import).  Envs a block leaves
+  open are closed.
+- The table of ``info`` keys in docs/semantics.md is the keys ``env.step`` gives.
+- Every ``stori-jax SUBCOMMAND ...`` line in a bash block or in backticks of those docs: the
+  subcommand exists, each ``--flag`` is one of its options (spelt in full: argparse would take
+  an abbreviation), the line parses, and its ``--set FIELD=VALUE`` make a valid config of its
+  agent.  Likewise the lines that run a script (``python benchmarks/throughput.py --quick``),
   whose parsers are captured from their ``main`` without running it; a bare backticked
   ``--flag`` must be an option of one of these commands.  Nothing heavy runs.
 
@@ -27,114 +28,64 @@ import re
 import shlex
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
-PORT_DOC = ROOT / "docs" / "port-your-stori-config.md"
+SEMANTICS = ROOT / "docs" / "semantics.md"
 COMMAND_DOCS = [README, ROOT / "baselines" / "README.md", ROOT / "benchmarks" / "README.md",
                 *sorted((ROOT / "docs").glob("*.md"))]
 SCRIPT_DIRS = [ROOT / "benchmarks", ROOT / "baselines", ROOT / "docs"]
+NOT_RUN = ("<!-- not run:", "<!-- recipe:")
 
 
-def python_blocks(text: str) -> list[str]:
-    return re.findall(r"```python\n(.*?)```", text, re.S)
+def python_blocks(text: str) -> list[tuple[int, str]]:
+    """(line, code) of every ```python block not marked ``<!-- not run: ... -->``."""
+    found = []
+    for block in re.finditer(r"^```python\n(.*?)^```", text, re.S | re.M):
+        before = text[:block.start()].rstrip().splitlines()
+        if before and before[-1].strip().startswith(NOT_RUN):
+            continue
+        found.append((text.count("\n", 0, block.start()) + 1, block.group(1)))
+    return found
 
 
-# -- README.md's example ---------------------------------------------------------------------------
-
-def readme_prologue() -> dict:
-    """The names README.md's example leaves to the reader, as it describes them: ``actions``
-    for its 8-env Breakout ("(8,) ints"), and a jittable ``policy_fn(params, obs, key) -> (B,)
-    int`` with its ``params``."""
-    import jax.numpy as jnp
-    import numpy as np
-
-    def policy_fn(params, obs, key):
-        return jnp.zeros(obs.shape[0], jnp.int32)  # NOOP, an action of every game
-
-    return {"actions": np.zeros(8, np.int32), "policy_fn": policy_fn, "params": None}
+RUNNABLE = [(doc, line, code) for doc in COMMAND_DOCS
+            for line, code in python_blocks(doc.read_text())]
 
 
-def comment_list(block: str, start: str, stop: str) -> str:
-    """The text of the example's comment lines from the one starting ``# <start>`` up to (not
-    including) the next one starting ``# <stop>``, comment markers removed."""
-    lines = [line.strip() for line in block.splitlines()]
-    begin = next(i for i, line in enumerate(lines) if line.startswith("# " + start))
-    end = next(i for i in range(begin + 1, len(lines)) if lines[i].startswith("# " + stop))
-    return " ".join(line.lstrip("#").strip() for line in lines[begin:end])
-
-
-def readme_info_keys(block: str) -> set[str]:
-    """The keys of the ``# info: a, b, c (remarks), ...`` comment."""
-    text = comment_list(block, "info:", "env.")[len("info:"):]
-    text = re.sub(r"\([^()]*\)", " ", text)  # remarks in brackets
-    return set(re.findall(r"[A-Za-z_]\w*", text))
-
-
-def readme_env_attributes(block: str) -> set[str]:
-    """The attributes named in the ``# env.num_envs, env.num_actions, ...`` comment lines."""
-    lines = [line.strip() for line in block.splitlines()]
-    return set(re.findall(r"env\.(\w+)", " ".join(line for line in lines
-                                                   if line.startswith("# env."))))
-
-
-def run_readme_example(text: str, path: str = str(README)) -> dict:
-    """Exec the single python block of ``text`` after the prologue; check its comments' info
-    keys and env attributes on the env it leaves open (closed here either way)."""
-    blocks = python_blocks(text)
-    assert len(blocks) == 1, f"README.md has {len(blocks)} python blocks, expected 1"
-    block = blocks[0]
-    namespace = readme_prologue()
+@pytest.mark.parametrize("doc, line, code", RUNNABLE,
+                         ids=[f"{d.relative_to(ROOT)}:{n}" for d, n, _ in RUNNABLE])
+def test_a_python_block_of_the_docs_runs_as_written(doc, line, code, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    namespace: dict = {"__name__": "__main__"}
     try:
-        exec(compile(block, path, "exec"), namespace)
-        env, traj = namespace["env"], namespace["traj"]
-        listed = readme_info_keys(block)
-        assert len(listed) >= 8, listed  # the comment was found and read
-        assert listed == set(traj.info), (
-            f"README's info keys {sorted(listed)} differ from env.step's {sorted(traj.info)}")
-        attributes = readme_env_attributes(block)
-        assert len(attributes) >= 5, attributes
-        missing = sorted(name for name in attributes if not hasattr(env, name))
-        assert not missing, f"README names env attributes the env lacks: {missing}"
-        assert env.single_observation_space.shape == env.observation_space.shape[1:]
-        assert traj.last_obs.shape == env.observation_space.shape
-        # the first reset's comment: the shape and dtype the Breakout env's observations have
-        shown = re.search(r"# obs \(([\d, ]+)\) (\w+)", block)
-        assert shown, "README's '# obs (shape) dtype' comment was not found"
-        obs = namespace["obs"]  # the last reset's (seed=3), of that same env
-        assert tuple(int(n) for n in shown.group(1).split(",")) == obs.shape
-        assert np.dtype(shown.group(2)) == obs.dtype
+        exec(compile(code, f"{doc}:{line}", "exec"), namespace)
     finally:
         for value in list(namespace.values()):
             if type(value).__name__ == "Env" and hasattr(value, "close"):
                 value.close()
-    return namespace
 
 
-def test_the_readme_example_runs_as_written():
-    run_readme_example(README.read_text())
+def test_the_readme_example_comes_early_and_the_readme_is_short():
+    text = README.read_text()
+    first = python_blocks(text)[0][0]
+    assert first <= 60 and len(text.splitlines()) <= 150, (first, len(text.splitlines()))
 
 
-# -- docs/port-your-stori-config.md's example ------------------------------------------------------
+def test_the_info_keys_the_semantics_doc_lists_are_the_envs():
+    """The first column of docs/semantics.md's info table (``a``, ``b`` ... per row) is what
+    ``env.step`` returns in info, with autoreset (the default)."""
+    import numpy as np
+    import stori_jax
 
-def run_port_example(text: str, path: str = str(PORT_DOC)) -> dict:
-    blocks = python_blocks(text)
-    assert len(blocks) == 1, f"{PORT_DOC.name} has {len(blocks)} python blocks, expected 1"
-    namespace: dict = {}
-    try:
-        exec(compile(blocks[0], path, "exec"), namespace)
-        assert type(namespace.get("env")).__name__ == "Env"
-    finally:
-        env = namespace.get("env")
-        if env is not None and hasattr(env, "close"):
-            env.close()
-    return namespace
-
-
-def test_the_port_your_config_example_runs_as_written():
-    run_port_example(PORT_DOC.read_text())
+    table = SEMANTICS.read_text().split("`info` holds, per env:")[1].split("\n\n")[1]
+    listed = {key for row in table.splitlines()[2:]
+              for key in re.findall(r"`(\w+)`", row.split("|")[1])}
+    with stori_jax.make("Breakout", num_envs=2, seed=0, num_workers=0) as env:
+        env.reset()
+        info = env.step(np.zeros(2, np.int32))[4]
+    assert listed == set(info), (sorted(listed), sorted(info))
 
 
 # -- command lines ---------------------------------------------------------------------------------
@@ -297,18 +248,17 @@ class Parsers:
 
 
 def check_set_overrides(values: list[str], what: str, game="Breakout", preset="3.1",
-                        seed=0, steps=100_000) -> None:
+                        seed=0, steps=100_000, agent="ppo") -> None:
     """``--set FIELD=VALUE`` as ``train`` reads them: known fields, valid values.  A FIELD in
     capitals is a placeholder."""
-    from baselines.commands import _parse_overrides
-    from baselines.ppo import PPOConfig
+    from baselines.agents import get_agent
+    from baselines.commands import agent_config
 
     values = [v for v in values if not v.partition("=")[0].isupper()]
     if not values:
         return
     try:
-        PPOConfig.from_overrides(PPOConfig(game=game, preset=preset, seed=seed,
-                                           total_steps=steps), _parse_overrides(values))
+        agent_config(get_agent(agent), game, preset, seed, steps, values)
     except ValueError as error:
         pytest.fail(f"{what}: --set {values}: {error}")
 
@@ -340,7 +290,8 @@ def check_command(command: dict, parsers: Parsers) -> None:
     args = parse_or_fail(parsers.main if command["program"] == "stori-jax" else parser,
                          argv, what)
     if getattr(args, "command", None) == "train":
-        check_set_overrides(args.overrides, what, args.game, args.preset, args.seed, args.steps)
+        check_set_overrides(args.overrides, what, args.game, args.preset, args.seed, args.steps,
+                            args.agent)
 
 
 DOC_COMMANDS = all_doc_commands()

@@ -590,8 +590,9 @@ def test_bad_make_arguments(kwargs, pattern):
 
 
 def test_an_interrupt_inside_inline_emulation_requires_a_reset():
-    """Envs emulated in this process cannot resume half a frame loop: a Ctrl-C there makes
-    the step fail clearly and the env usable again after reset()."""
+    """Envs emulated in this process cannot resume half a frame loop: after a Ctrl-C there,
+    the very next call already says reset() (it said "a step is in flight: call recv()"
+    first), and reset() makes the env usable again."""
     import stori_jax
 
     env = stori_jax.make("Breakout", num_envs=3, seed=0, obs="ram", num_workers=1,
@@ -608,10 +609,10 @@ def test_an_interrupt_inside_inline_emulation_requires_a_reset():
         with pytest.raises(KeyboardInterrupt):
             env.step(np.zeros(3, np.int32))
         emulator.step = real_step
-        with pytest.raises(stori_jax.InterruptedStepError, match="call reset"):
-            env.recv()
         with pytest.raises(RuntimeError, match=r"call reset\(\) first"):
             env.step(np.zeros(3, np.int32))
+        with pytest.raises(RuntimeError, match=r"needs reset\(\)"):
+            env.recv()
         env.reset()
         obs, *_ = env.step(np.zeros(3, np.int32))
         assert obs.shape == (3, 128)
@@ -758,8 +759,8 @@ def interrupted_at(function, statement: str):
 @pytest.mark.parametrize("call, statement", [
     ("step", "self._reset_pending = pending"),
     ("step", "self._in_flight = None"),
-    ("reset", "self._reseed_due = False"),
-    ("reset", "self._needs_reset = False"),
+    ("reset", "self._restart_due = False"),
+    ("reset", "self._phase = Phase.READY"),
 ])
 @pytest.mark.parametrize("then", ["reset", "step", "restore"])
 def test_an_interrupt_inside_the_envs_record_of_a_call_requires_a_reset(call, statement, then):
@@ -923,7 +924,7 @@ def test_no_workers_emulates_every_env_in_this_process():
 def test_inline_envs_alone_leaves_the_workers_the_rest(monkeypatch):
     """Only inline_envs given, on a machine with many cores: the default worker count shrinks to
     the envs left to the workers, instead of an error about a num_workers nobody passed."""
-    monkeypatch.setattr("stori_jax.env._available_cores", lambda: 16)
+    monkeypatch.setattr("stori_jax.builder.available_cores", lambda: 16)
     with make("Breakout", num_envs=4, num_workers=None, inline_envs=2) as env:
         assert len(env.backend.pids) == 2
         env.reset()
@@ -1188,9 +1189,9 @@ def test_an_interrupted_start_leaves_no_worker(monkeypatch):
 
 
 def test_a_reset_straight_after_an_interrupt_inside_inline_emulation():
-    """The env of test_an_interrupt_inside_inline_emulation_requires_a_reset, reset without
-    the recv() that reports the broken step first: reset() finishes the step itself and gives
-    what the reset after that recv() gives."""
+    """The env of test_an_interrupt_inside_inline_emulation_requires_a_reset: reset() waits
+    for the workers' half of the broken step itself, and a refused recv() before it changes
+    nothing (both give the same reset and steps)."""
     import jax
 
     kw = dict(num_envs=3, num_workers=1, inline_envs=2)
@@ -1200,7 +1201,7 @@ def test_a_reset_straight_after_an_interrupt_inside_inline_emulation():
             e.reset()
             with interrupting(e.backend._inline[1], "step"), pytest.raises(KeyboardInterrupt):
                 e.step(np.zeros(3, np.int32))
-        with pytest.raises(stori_jax.InterruptedStepError):
+        with pytest.raises(RuntimeError, match=r"needs reset\(\)"):
             twin.recv()
         got, expected = env.reset(), twin.reset()  # (obs, info): every array alike
         for x, y in zip(jax.tree.leaves(got), jax.tree.leaves(expected), strict=True):
@@ -1220,3 +1221,41 @@ def test_the_context_manager_closes_on_an_error_and_lets_it_through():
             env.reset()
             raise ValueError("inside the block")
     assert env.closed
+
+
+@pytest.mark.parametrize("second", ["step", "reset", "snapshot", "xla"])
+def test_a_call_from_a_second_thread_during_a_call_is_refused_and_changes_nothing(second):
+    """Two threads stepping one env interleaved their steps: a trajectory silently differed
+    from the single-threaded run's.  A call while another thread's call runs is refused with
+    ConcurrentUseError, and the running call's results are the single-threaded run's."""
+    env, twin = make("Breakout", num_workers=1, inline_envs=0), make("Breakout")
+    try:
+        env.reset(), twin.reset()
+        waiting, release, outcome = threading.Event(), threading.Event(), {}
+        real_recv = env.backend.recv
+
+        def held_recv(*args, **kwargs):
+            waiting.set()
+            release.wait(10)
+            return real_recv(*args, **kwargs)
+
+        env.backend.recv = held_recv
+        first = threading.Thread(target=lambda: outcome.update(step=env.step([1, 2])))
+        first.start()
+        assert waiting.wait(10)
+        calls = {"step": lambda: env.step([0, 0]), "reset": env.reset,
+                 "snapshot": env.snapshot, "xla": env.xla}
+        with pytest.raises(stori_jax.ConcurrentUseError, match=rf"{second}\(\) was called "
+                           r"while another thread's call of this env \(step\(\)\) runs"):
+            calls[second]()
+        release.set()
+        first.join(10)
+        env.backend.recv = real_recv
+        for x, y in zip(outcome["step"][:4], twin.step([1, 2])[:4]):
+            np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
+        for a in ([3, 1], [0, 2]):  # and the env goes on as the twin
+            np.testing.assert_array_equal(np.asarray(env.step(a)[4]["ram"]),
+                                          np.asarray(twin.step(a)[4]["ram"]))
+    finally:
+        env.close()
+        twin.close()

@@ -25,31 +25,13 @@ import numpy as np
 from stori_jax.backends.interrupts import interrupts_deferred
 from stori_jax.backends.layout import SharedBuffers
 from stori_jax.backends.worker import WorkerSpec, reset_command, reset_seed, worker_main
+from stori_jax.errors import (EnvClosedError, InterruptedStepError, WorkerError,  # noqa: F401
+                              WorkersLateError)
 
 
 # recv(timeout=...) at most: the workers' pipes are waited on in int32 milliseconds (2^31 ms is
 # 24.8 days), so a longer finite wait cannot be honoured; None waits as long as it takes
 MAX_TIMEOUT_S = 1_000_000
-
-
-class WorkerError(RuntimeError):
-    """An emulator worker died or failed."""
-
-
-class InterruptedStepError(RuntimeError):
-    """A step was interrupted inside emulation; the env needs reset()."""
-
-
-class EnvClosedError(RuntimeError):
-    """The environment was used after close()."""
-
-
-class WorkersLate(TimeoutError):
-    """Workers did not reply within a recv timeout; the command stays in flight."""
-
-    def __init__(self, what: str, workers: list[int], pids: list[int]):
-        self.what, self.workers, self.pids = what, workers, pids
-        super().__init__(f"emulator worker(s) {workers} (pids {pids}) did not finish {what}")
 
 
 def split_batch(num_envs: int, num_workers: int) -> list[tuple[int, int]]:
@@ -153,9 +135,12 @@ if hasattr(os, "register_at_fork"):
 
 
 class SubprocBackend:
-    """Owns the worker processes and the shared buffers of one batched env."""
+    """Owns the worker processes and the shared buffers of one batched env
+    (:class:`stori_jax.backends.protocol.Backend`)."""
 
-    RECV_TIMEOUT = True  # recv(timeout) bounds the wait for the workers
+    name = "subproc"
+    can_time_out = True  # recv(timeout) bounds the wait for the workers
+    can_snapshot = True
 
     frames_layout = "pair"  # or "pooled" (set in __init__)
 
@@ -234,6 +219,12 @@ class SubprocBackend:
         """A command was sent and its replies are not all in (e.g. its wait was interrupted)."""
         return self._pending
 
+    @property
+    def half_stepped(self) -> bool:
+        """A step was interrupted inside an emulator of this process: whatever the workers
+        still owe, only a reset continues (their replies are awaited by it)."""
+        return self._inline_broken is not None
+
     def _send_all(self, command: bytes) -> None:
         self._send_each([command] * len(self.conns))
 
@@ -279,7 +270,7 @@ class SubprocBackend:
                 ready = wait(list(waiting.values()) + list(sentinels), timeout=left)
                 if not ready:
                     late = sorted(waiting)
-                    raise WorkersLate(what, late, [self.processes[w].pid for w in late])
+                    raise WorkersLateError(what, late, [self.processes[w].pid for w in late])
                 with interrupts_deferred():  # a reply read off its pipe is recorded
                     for obj in ready:
                         self._take_reply(obj, waiting, sentinels, what)
@@ -327,8 +318,8 @@ class SubprocBackend:
             self._inline_command, self._what = b"S", "a step"
 
     def recv(self, timeout: float | None = None) -> dict[str, np.ndarray]:
-        """Wait for the workers (at most ``timeout`` seconds, then :class:`WorkersLate` with the
-        command still pending); the returned views stay valid until the next send."""
+        """Wait for the workers (at most ``timeout`` seconds, then :class:`WorkersLateError`
+        with the command still pending); the returned views stay valid until the next send."""
         if self.closed:
             raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
         if not self._pending:
