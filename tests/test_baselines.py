@@ -1225,11 +1225,11 @@ def test_the_table_notes_other_budgets_unfinished_runs_and_the_papers_other_envi
     table = json.loads((tmp_path / "out" / "table.json").read_text())
     assert table["notes"] == [
         "Gopher 2.1: the paper's numbers come from another environment: the reference's "
-        "'hole stays open' rule mostly undid the gopher's digging (STORI_SPEC section 7, the "
+        "'hole stays open' rule mostly undid the gopher's digging (docs/spec.md section 7, the "
         "likely cause of DreamerV3's 11333); here it undoes only the farmer's fills",
         "BankHeist 2.1: the paper's numbers come from another environment: the reference's "
         "city switch dropped the player back to an early level; here the level is kept "
-        "(STORI_SPEC section 8)",
+        "(docs/spec.md section 8)",
         "Gopher 2.1 PPO: checkpoints of unfinished runs (seed 7: 1024 of 12288 agent steps)",
         "Gopher 2.1 PPO seed(s) [7]: runs of 12288 agent steps (the paper's: 100000)",
         "Gopher 2.1 PPO seed(s) [13]: runs of 1000000 agent steps (the paper's: 100000)",
