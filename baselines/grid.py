@@ -300,12 +300,30 @@ def reusable_result(path: Path, wanted: dict, checkpoint: Path | None) -> dict |
     return result
 
 
+OMP_NUM_THREAD_VARIABLE = "STORI_JAX_GRID_OMP_NUM_THREADS"  # the driver's OMP_NUM_THREADS
+
+
+def keep_omp_as_the_driver_has_it() -> None:
+    """OMP_NUM_THREADS as the grid's driver has it (unset, unless set there), not as Ray set it
+    for the worker (the trial's CPUs): XLA's OpenMP-threaded CPU kernels round differently
+    with another thread count, and a trial must compute what `stori-jax train` computes.  Done
+    before this process first uses JAX (OpenMP reads the variable when it starts)."""
+    wanted = os.environ.get(OMP_NUM_THREAD_VARIABLE)
+    if wanted is None:  # not started by the grid's connect(): nothing known to restore
+        return
+    if wanted:
+        os.environ["OMP_NUM_THREADS"] = wanted
+    else:
+        os.environ.pop("OMP_NUM_THREADS", None)
+
+
 def tune_trial(config: dict) -> None:
     """The Tune trainable: :func:`play_trial` inside a Ray worker, its emulators held to the
     CPUs Ray reserved for the trial.  A ValueError (the trial cannot run as asked: it would
     fail again the same way) ends the trial with its message as its result, not as an error
     for Tune to retry; anything else (a crash, a lost node) is Tune's to retry from the last
     checkpoint."""
+    keep_omp_as_the_driver_has_it()  # first: before anything imports JAX
     import ray
     from ray import tune
 
@@ -549,7 +567,16 @@ def connect(address: str | None) -> bool:
 
     if ray.is_initialized():
         return False
-    quiet = dict(log_to_driver=False, logging_level=logging.WARNING)
+    # Ray starts its workers at niceness 15, below every other process: the trials are the
+    # work here (as `stori-jax train` is), so they run at the usual priority.  And Ray sets
+    # OMP_NUM_THREADS to a trial's CPUs where it is unset, which changes XLA's float rounding
+    # on CPU (its OpenMP-threaded kernels reduce in another order): the trials get the
+    # driver's setting back (OMP_NUM_THREAD_VARIABLE, read by tune_trial), so that they compute
+    # exactly what `stori-jax train` run from the same shell computes
+    env = {"RAY_worker_niceness": "0",
+           OMP_NUM_THREAD_VARIABLE: os.environ.get("OMP_NUM_THREADS", "")}
+    quiet = dict(log_to_driver=False, logging_level=logging.WARNING,
+                 runtime_env={"env_vars": env})
     if address is None:
         from baselines.runs import cores
 
