@@ -45,11 +45,11 @@ PART_FILE = "part.json"  # beside it: how far the run had trained
 DEFAULT_SEEDS = (0, 7, 13)  # the paper's
 DEFAULT_STEPS = 100_000  # the paper's budget, agent steps
 DEFAULT_OUT = Path("results") / "grid"
-DEFAULT_PARTS = 4  # a trainable agent's run is trained (and checkpointed to Tune) in this many parts
+DEFAULT_PARTS = 4  # a trained run is trained (and checkpointed to Tune) in this many parts
 DEFAULT_MAX_FAILURES = 3  # Tune retries a trial whose process died this many times
-TABLE_EVERY_S = 10.0  # the table is rewritten at most this often while trials finish (and at the end)
+TABLE_EVERY_S = 10.0  # the table is rewritten at most this often as trials finish (and at the end)
 INSTALL = ("stori-jax grid runs on Ray Tune, an optional extra: pip install -e \".[ray]\" in a "
-           "checkout of stori-jax, or pip install \"ray[tune]>=2.40\"")
+           "checkout of stori-jax, or pip install \"ray[tune,client]>=2.40\"")
 INTERRUPTED = 130
 
 
@@ -780,9 +780,10 @@ def add_parser(sub) -> None:
                            "experiment in tune/; on a cluster, storage every node mounts at "
                            "this path")
     grid.add_argument("--address", default=None,
-                      help="a running Ray cluster: auto (the one this machine belongs to) or "
-                           "HOST:PORT of its head (default: start Ray here, on this machine's "
-                           "cores)")
+                      help="a running Ray cluster: auto (the one this machine belongs to), "
+                           "HOST:PORT of its head, or ray://HOST:PORT (Ray Client: the grid is "
+                           "driven from the head; --out is the cluster's path) (default: start "
+                           "Ray here, on this machine's cores; docs/cluster.md)")
     grid.add_argument("--cpus-per-run", type=float, default=1,
                       help="CPUs Ray reserves per trial; its emulator workers use as many "
                            "(default 1)")
