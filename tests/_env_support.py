@@ -19,10 +19,12 @@ BALL_X, BALL_Y, PADDLE_X = 99, 101, 72
 
 
 def make(game, config=None, **kw):
-    """``stori_jax.make`` with small defaults: 2 envs, 1 worker, seed 0, RAM observations."""
+    """``stori_jax.make`` with small defaults: 2 envs, seed 0, RAM observations, every env
+    emulated in this process (``num_workers=0``: no worker to start; a test of the workers
+    asks for them)."""
     kw.setdefault("num_envs", 2)
     kw.setdefault("seed", 0)
-    kw.setdefault("num_workers", 1)
+    kw.setdefault("num_workers", 0)
     kw.setdefault("obs", "ram")
     return stori_jax.make(game, config=config, **kw)
 

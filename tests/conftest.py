@@ -1,10 +1,43 @@
 """Scripts the tests run in a subprocess (``python script.py`` puts the script's folder first on
 ``sys.path``) import this checkout's packages, not whichever checkout the environment installed:
-a copy of the repository tested with a shared virtual environment tests itself."""
+a copy of the repository tested with a shared virtual environment tests itself.
 
+One JAX compilation cache serves a whole test run: the xdist workers and every subprocess the
+tests start (a training run, a CLI command) load what another process of the run compiled
+instead of compiling it again.  It lives in this run's pytest temporary folder (pytest keeps
+the last few); its keys hold the compiled program and JAX's version, so an entry is only ever
+loaded for the very computation that wrote it."""
+
+import importlib.util
 import os
 from pathlib import Path
+
+import pytest
 
 ROOT = str(Path(__file__).resolve().parents[1])
 os.environ["PYTHONPATH"] = os.pathsep.join(
     [ROOT] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p and p != ROOT])
+
+CACHE_SETTINGS = {
+    "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",  # every compilation is worth sharing
+    "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "-1",
+    # a size bound turns on JAX's file lock: two processes compiling the same program at once
+    # never read a half-written entry
+    "JAX_COMPILATION_CACHE_MAX_SIZE": str(2 ** 32),
+}
+
+
+@pytest.hookimpl(trylast=True)  # after pytest's own tmp_path set-up
+def pytest_configure(config):
+    """Set the run's compilation cache up in the controlling process, before any JAX import and
+    before the xdist workers start (they inherit the environment).  A cache the user chose is
+    left alone; without ``filelock`` (JAX's lock needs it) there is none."""
+    if hasattr(config, "workerinput") or "JAX_COMPILATION_CACHE_DIR" in os.environ:
+        return
+    if importlib.util.find_spec("filelock") is None:
+        return
+    cache = config._tmp_path_factory.getbasetemp() / "jax-compilation-cache"
+    cache.mkdir(exist_ok=True)
+    os.environ["JAX_COMPILATION_CACHE_DIR"] = str(cache)
+    for name, value in CACHE_SETTINGS.items():
+        os.environ.setdefault(name, value)

@@ -121,7 +121,7 @@ def test_reset_reports_no_outcome_of_the_step_before(inline_envs):
     episode totals: it carried the last step's event count and the ended episode's length and
     return, so a logger reading them counted the episode twice (worker and inline envs)."""
     env = make("BankHeist", Config(event=RandomEvent(3, 1.0)), max_episode_frames=40,
-               inline_envs=inline_envs)
+               num_workers=1, inline_envs=inline_envs)
     try:
         env.reset()
         for _ in range(10):

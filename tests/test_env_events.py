@@ -163,7 +163,7 @@ def test_breakout_regenerate_restores_one_byte_per_firing():
     """Mode 3 (step granularity, p = 0.15): a firing writes one hit byte back to its
     episode-start value; without a firing no byte ever returns to its start value, and block
     bytes only ever hold a subset of their start bits."""
-    env = make("Breakout", event(3, 0.15, "step"), num_envs=6, num_workers=2)
+    env = make("Breakout", event(3, 0.15, "step"), num_envs=6)
     try:
         run = run_lockstep([env], 400, lambda k, runs: breakout_tracker(
             runs[0].info[-1]["ram"] if runs[0].info else runs[0].reset_info["ram"]))[0]
@@ -307,7 +307,7 @@ def test_boxing_hit_cancel_state_starts_afresh_with_each_episode():
     'cancelled' changes, leaked into the new bout); and a cancel on an episode's last frame
     leaves no pending correction for the next episode."""
     # p = 0.5, episodes of 600 frames: the first step of each new episode starts at 0 : 0
-    env = make("Boxing", event(2, 0.5), num_envs=8, num_workers=2, max_episode_frames=600)
+    env = make("Boxing", event(2, 0.5), num_envs=8, max_episode_frames=600)
     try:
         run = run_env(env, random_actions(18, 160, 8, seed=0))
     finally:
@@ -355,7 +355,7 @@ def test_bankheist_city_switch_picks_each_other_maze_a_third_of_the_time():
     """Mode 3 at p = 0.02 per frame: where a switch fires, the new maze is one of the three
     others, uniformly, drawn independently of the firing draw (the draw that fired is below
     p, so reusing it would always pick the same maze)."""
-    env = make("BankHeist", event(3, 0.02), num_envs=4, num_workers=2, frame_skip=1)
+    env = make("BankHeist", event(3, 0.02), num_envs=4, frame_skip=1)
     try:
         run = run_env(env, np.full((700, 4), NOOP, np.int32))
     finally:
@@ -393,7 +393,7 @@ def test_events_fire_in_silence(capfd):
     """docs/spec.md section 9b: the reference's event code printed on every firing.  Here
     nothing is written to stdout or stderr, by this process (an inline env) or by a worker, at
     every firing."""
-    env = make("Boxing", event(3, 1.0), num_envs=2, inline_envs=1)
+    env = make("Boxing", event(3, 1.0), num_envs=2, num_workers=1, inline_envs=1)
     try:
         env.reset()
         fired = sum(int(np.asarray(env.step(np.zeros(2, np.int32))[4]["event_fired"]).sum())
@@ -444,7 +444,7 @@ def test_gopher_fill_is_undone_and_digging_is_not():
     1 keeps it, and otherwise the two runs are the same game."""
     steps = 420
     actions = gopher_policy(steps, 4)
-    kw = dict(num_envs=4, num_workers=2)
+    kw = dict(num_envs=4)
     envs = [make("Gopher", event(1, 1.0), **kw), make("Gopher", event(2, 1.0), **kw)]
     try:
         keep, zero = run_lockstep(envs, steps, lambda k, runs: actions[k])
@@ -601,7 +601,7 @@ def test_bankheist_city_switch_keeps_the_level():
     turned on at that step with a sudden concept drift (concept 1 = the twin's game)."""
     steps = 500
     actions = random_actions(18, steps, 4, seed=0)
-    twin_env = make("BankHeist", num_envs=4, num_workers=2)
+    twin_env = make("BankHeist", num_envs=4)
     try:
         twin = run_env(twin_env, actions)
     finally:
@@ -613,7 +613,7 @@ def test_bankheist_city_switch_keeps_the_level():
     # step granularity: one switch per step, so every step after the drift changes the maze
     drift = Config(drift=ConceptDrift("sudden", t + 1, Config(event=RandomEvent(3, 1.0))),
                    granularity="step")
-    env = make("BankHeist", drift, num_envs=4, num_workers=2)
+    env = make("BankHeist", drift, num_envs=4)
     actions = actions[:t + 6].copy()
     actions[t + 1:] = NOOP  # stay in the city while the switches happen
     try:
@@ -638,7 +638,7 @@ def test_bankheist_empty_bank_zeroes_the_robbery_reward():
     steps = 1600
     actions = np.repeat(random_actions(18, steps // 4, 4, seed=0), 4, axis=0)
     ev, twin = lockstep_with_twin("BankHeist", event(4, 1.0), steps, lambda k, runs: actions[k],
-                                  num_envs=4, num_workers=2, frame_skip=1)
+                                  num_envs=4, frame_skip=1)
     np.testing.assert_array_equal(ev.ram, twin.ram)
     slots = twin.ram[:, :, 24:27]
     robbed = ((slots[:-1] == 253) & (slots[1:] != 253)).any(-1) & ~twin.done

@@ -43,7 +43,7 @@ def test_close_stops_every_worker_and_later_calls_raise():
 
 
 def test_context_manager_closes():
-    with make("Boxing") as env:
+    with make("Boxing", num_workers=1) as env:
         pids = list(env.backend.pids)
         env.reset()
     assert env.closed and wait_gone(pids, 1.0)
@@ -65,7 +65,7 @@ def test_deleting_an_env_stepped_through_xla_stops_its_workers():
     import jax
     import jax.numpy as jnp
 
-    env = make("Breakout", num_envs=2)
+    env = make("Breakout", num_envs=2, num_workers=1)
     env.reset()
     handle, step = env.xla()
     handle, out = step(handle, jnp.zeros(2, jnp.int32))
@@ -101,7 +101,7 @@ def test_an_interrupted_step_stays_in_flight_and_can_be_finished():
     """Ctrl-C while waiting for the emulators (a notebook interrupt): the step stays in flight;
     recv() finishes it with the right result, and later steps match an uninterrupted twin.
     (Before the fix the next step() took the interrupted step's replies as its own.)"""
-    ev, twin = make("Breakout"), make("Breakout")
+    ev, twin = make("Breakout", num_workers=1), make("Breakout")
     armed = threading.Event()
 
     def on_sigint(*_):
@@ -196,7 +196,7 @@ def test_ctrl_c_between_two_workers_leaves_the_step_in_flight(where):
     env goes on as an uninterrupted twin.  (Before, the env forgot the sent step and later
     steps read the workers' buffers while they were being written; or recv() waited forever
     for a reply it had already read.)"""
-    env, twin = (make("Breakout", num_workers=2, inline_envs=0) for _ in range(2))
+    env, twin = make("Breakout", num_workers=2, inline_envs=0), make("Breakout")
     try:
         env.reset()
         twin.reset()
@@ -215,7 +215,7 @@ def test_ctrl_c_between_two_workers_leaves_the_step_in_flight(where):
 def test_an_interrupted_snapshot_points_every_call_to_reset():
     """Ctrl-C while the workers copy their state: step, recv, snapshot and xla all say reset(),
     which waits for the workers and gives the twin's first observation."""
-    env, twin = make("Breakout"), make("Breakout")
+    env, twin = make("Breakout", num_workers=1), make("Breakout")
     try:
         env.reset()
         twin.reset()
@@ -238,7 +238,7 @@ def test_ctrl_c_stops_a_restore_waiting_on_a_stuck_worker():
     """The states go to the workers through files: every command is a few bytes, so nothing
     blocks while Ctrl-C is held back.  (A pickle of 16 emulators filled the pipe, and Ctrl-C
     waited for the stopped worker to read it.)"""
-    env = make("Breakout", num_envs=16)
+    env = make("Breakout", num_envs=16, num_workers=1)
     try:
         env.reset()
         snapshot = env.snapshot()
@@ -263,8 +263,7 @@ def test_a_timed_out_recv_names_the_late_worker_and_can_be_finished(call):
     """recv(timeout), or step(timeout), while a worker is stopped (SIGSTOP): a TimeoutError that
     names it, the step stays in flight, and once the worker runs again recv() finishes it as an
     uninterrupted twin does."""
-    kw = dict(num_envs=2, num_workers=2, inline_envs=0)
-    ev, twin = make("Breakout", **kw), make("Breakout", **kw)
+    ev, twin = make("Breakout", num_workers=2, inline_envs=0), make("Breakout")
     try:
         ev.reset()
         twin.reset()
@@ -297,8 +296,7 @@ def test_a_timed_out_reset_needs_a_reset_that_waits_for_it(in_flight):
     """reset(timeout) while a worker is stopped: a TimeoutError that names it (the timeout bounds
     the wait for a step still in flight too); the env refuses steps until reset() again, which
     waits for the late one and gives the same episode as an uninterrupted twin."""
-    kw = dict(num_envs=2, num_workers=2, inline_envs=0)
-    ev, twin = make("Breakout", **kw), make("Breakout", **kw)
+    ev, twin = make("Breakout", num_workers=2, inline_envs=0), make("Breakout")
     try:
         for env in (ev, twin):
             env.reset()
@@ -331,9 +329,8 @@ def test_a_timed_out_reset_with_a_seed_is_finished_from_that_seed(in_flight):
     """reset(seed=7, timeout) while a worker is stopped (late with the reset, or with a step
     still in flight, before the reset was sent): the plain reset() that finishes it restarts
     from seed 7, the inline env too, as a new env of seed 7."""
-    kw = dict(num_envs=3, num_workers=1, inline_envs=1)
-    ev = make("Breakout", preset="1", seed=3, **kw)
-    fresh = make("Breakout", preset="1", seed=7, **kw)
+    ev = make("Breakout", preset="1", seed=3, num_envs=3, num_workers=1, inline_envs=1)
+    fresh = make("Breakout", preset="1", seed=7, num_envs=3)
     try:
         ev.reset()
         ev.step([1, 2, 3])
@@ -624,7 +621,7 @@ def test_workers_outlive_the_thread_that_made_the_env():
     """Workers watch their parent process, not the thread that started them: an env made in a
     short-lived thread (a thread pool, a data loader) keeps working after that thread ends."""
     made = {}
-    thread = threading.Thread(target=lambda: made.update(env=make("Breakout")))
+    thread = threading.Thread(target=lambda: made.update(env=make("Breakout", num_workers=1)))
     thread.start()
     thread.join()
     env = made["env"]
@@ -854,7 +851,7 @@ def test_a_ram_observation_shares_no_screen_buffers():
 
 @pytest.mark.timeout(60)
 def test_close_from_another_thread_is_reported_as_closed_not_as_a_dead_worker():
-    env = make("Breakout")
+    env = make("Breakout", num_workers=1)
     try:
         env.reset()
         os.kill(env.backend.pids[0], signal.SIGSTOP)  # busy as long as it takes; close kills it
@@ -956,10 +953,11 @@ def test_a_dead_workers_error_names_its_index_envs_pid_and_exit_code():
 
 
 def test_a_batch_split_unevenly_between_workers_plays_the_one_worker_run():
-    """3 envs on 2 workers (2 + 1): every env is emulated, with its own seed, as on 1 worker."""
+    """3 envs on 2 workers (2 + 1): every env is emulated, with its own seed, as without
+    workers."""
     actions = np.random.default_rng(1).integers(0, 4, (6, 3), dtype=np.int32)
     with make("Breakout", preset="1", num_envs=3, num_workers=2, inline_envs=0) as split, \
-            make("Breakout", preset="1", num_envs=3, num_workers=1, inline_envs=0) as whole:
+            make("Breakout", preset="1", num_envs=3) as whole:
         got, expected = run_env(split, actions), run_env(whole, actions)
         # the seeds themselves (ALE's random state, which play alone need not show)
         assert emulator_states(split) == emulator_states(whole)
@@ -972,8 +970,7 @@ def test_a_second_send_is_refused_and_leaves_the_step_in_flight_untouched():
     """send() while a step is in flight is refused before it writes anything: the step in
     flight (its inline env emulated only in recv(), its worker stopped meanwhile) finishes with
     its own actions, as an uninterrupted twin's; the backend refuses a second command too."""
-    kw = dict(num_envs=2, num_workers=1, inline_envs=1)
-    env, twin = make("Breakout", **kw), make("Breakout", **kw)
+    env, twin = make("Breakout", num_envs=2, num_workers=1, inline_envs=1), make("Breakout")
     try:
         env.reset()
         twin.reset()
@@ -1060,7 +1057,7 @@ def test_ctrl_c_after_the_first_worker_got_a_snapshot_command_points_to_reset():
     the workers owe replies, so every call points to reset(), which collects them; the env then
     goes on as an uninterrupted twin.  (Otherwise the next step would take the snapshot's
     reply for its own, and read buffers the worker is still writing.)"""
-    env, twin = (make("Breakout", num_workers=2, inline_envs=0) for _ in range(2))
+    env, twin = make("Breakout", num_workers=2, inline_envs=0), make("Breakout")
     try:
         env.reset()
         twin.reset()
@@ -1125,7 +1122,7 @@ def test_close_removes_the_state_files_of_an_interrupted_restore(tmp_path, monke
     import tempfile
 
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
-    env = make("Breakout")
+    env = make("Breakout", num_workers=1)
     try:
         env.reset()
         snapshot = env.snapshot()

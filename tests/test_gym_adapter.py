@@ -15,7 +15,7 @@ def test_every_preset_is_registered():
 
 
 def test_single_env_follows_gymnasium_api():
-    env = gym.make("stori_jax/Gopher-3.2-v0")
+    env = gym.make("stori_jax/Gopher-3.2-v0", num_workers=0)
     try:
         check_env(env.unwrapped, skip_render_check=True)
         obs, info = env.reset(seed=5)
@@ -39,7 +39,7 @@ def test_single_env_follows_gymnasium_api():
 
 
 def test_single_env_reset_seed_reproduces_the_run():
-    env = gym.make("stori_jax/Breakout-1-v0", obs="ram")
+    env = gym.make("stori_jax/Breakout-1-v0", obs="ram", num_workers=0)
     try:
         runs = []
         for _ in range(2):
@@ -79,7 +79,8 @@ def test_reset_with_a_new_seed_keeps_the_worker_processes():
 
 
 def test_vector_env_next_step_autoreset():
-    envs = gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, obs="ram", frame_skip=4)
+    envs = gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, obs="ram", frame_skip=4,
+                        num_workers=0)
     try:
         assert envs.metadata["autoreset_mode"] == gym.vector.AutoresetMode.NEXT_STEP
         obs, info = envs.reset(seed=0)
@@ -110,7 +111,7 @@ def test_a_spec_saved_as_json_makes_the_env_again_and_max_episode_steps_is_named
     preset as a list and was refused as contradicting itself; max_episode_steps in make_vec's
     default mode was a TypeError from make, not a pointer to max_episode_frames."""
     spec = gym.envs.registration.EnvSpec.from_json(gym.spec("stori_jax/Breakout-3.1-v0").to_json())
-    env = gym.make(spec, obs="ram")
+    env = gym.make(spec, obs="ram", num_workers=0)
     try:
         assert env.reset(seed=1)[0].shape == (128,)
     finally:
@@ -151,7 +152,8 @@ def test_a_vector_env_s_fixed_autoreset_is_named_as_its_own():
 
 
 def test_the_ids_own_game_and_preset_in_another_case_are_not_a_contradiction():
-    env = gym.make("stori_jax/Breakout-3.2A-v0", game="breakout", preset="3.2a", obs="raw")
+    env = gym.make("stori_jax/Breakout-3.2A-v0", game="breakout", preset="3.2a", obs="raw",
+                   num_workers=0)
     env.close()
 
 
@@ -160,8 +162,9 @@ def test_a_refused_seed_leaves_the_env_usable(vector):
     """With random no-ops at every reset (noop_max) the seed shows in the RAM: after a refused
     seed the env goes on as the env of seed 1 does."""
     def made():
-        return (gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, noop_max=30) if vector
-                else gym.make("stori_jax/Breakout-3.1-v0", noop_max=30))
+        kw = dict(noop_max=30, obs="ram", num_workers=0)
+        return (gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, **kw) if vector
+                else gym.make("stori_jax/Breakout-3.1-v0", **kw))
 
     reference, env = made(), made()
     try:
@@ -182,8 +185,9 @@ def test_a_refused_seed_leaves_the_env_usable(vector):
 
 @pytest.mark.parametrize("vector", [False, True])
 def test_reset_options_are_refused_not_ignored(vector):
-    env = (gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2) if vector
-           else gym.make("stori_jax/Breakout-3.1-v0"))
+    kw = dict(obs="ram", num_workers=0)
+    env = (gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, **kw) if vector
+           else gym.make("stori_jax/Breakout-3.1-v0", **kw))
     try:
         env.reset(options={})  # nothing asked
         with pytest.raises(ValueError, match="reset options are not supported.*reset_mask"):
@@ -198,9 +202,10 @@ def test_reset_options_are_refused_not_ignored(vector):
 def test_a_config_of_ones_own_through_the_adapter_classes():
     from stori_jax.gym_adapter import StoriGymEnv, StoriVectorEnv
 
-    env = StoriGymEnv("Breakout", config=stori_jax.Config(ram_observation=True), obs="ram")
+    env = StoriGymEnv("Breakout", config=stori_jax.Config(ram_observation=True), obs="ram",
+                      num_workers=0)
     envs = StoriVectorEnv(2, "Breakout", config=stori_jax.Config(
-        action_noise=stori_jax.ActionNoise(1.0)))
+        action_noise=stori_jax.ActionNoise(1.0)), obs="ram", num_workers=0)
     try:
         obs, info = env.reset(seed=0)
         assert obs.shape == (128,) and "labels" in info
@@ -216,7 +221,7 @@ def test_vector_env_close_seeding_and_writable_outputs():
     """closed is True after close() and no reset brings the env back (reset(seed=k) used to
     start new workers); reset(seed=k) seeds np_random as gymnasium's vector envs do; outputs
     are writable numpy arrays (in-place edits of rewards or obs raised 'read-only')."""
-    envs = gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, obs="ram")
+    envs = gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, obs="ram", num_workers=0)
     obs, info = envs.reset(seed=3)
     assert envs.np_random_seed == 3
     obs, reward, terminated, truncated, info = envs.step(np.zeros(2, np.int64))
@@ -230,7 +235,7 @@ def test_vector_env_close_seeding_and_writable_outputs():
             envs.reset(seed=seed)
     with pytest.raises(stori_jax.EnvClosedError, match="gymnasium.make"):
         envs.step(np.zeros(2, np.int64))  # named stori_jax.make, the wrong way back
-    single = gym.make("stori_jax/Breakout-3.1-v0", obs="ram")
+    single = gym.make("stori_jax/Breakout-3.1-v0", obs="ram", num_workers=0)
     obs, info = single.reset(seed=1)
     assert obs.flags.writeable and info["ram"].flags.writeable
     single.close()
@@ -250,7 +255,7 @@ def test_the_default_modes_infos_carry_gymnasiums_masks_as_the_sync_mode_does():
     """Every info key, nested ones too, comes with its ``_key`` mask (all True: every env
     reports every key), in the layout and dtypes gymnasium's own sync mode builds from
     one-env infos. The default mode gave the keys without their masks."""
-    made = [gym.make_vec("stori_jax/Gopher-2.1-v0", num_envs=2, obs="ram", **mode)
+    made = [gym.make_vec("stori_jax/Gopher-2.1-v0", num_envs=2, obs="ram", num_workers=0, **mode)
             for mode in ({}, {"vectorization_mode": "sync"})]
     try:
         for step in (False, True):
@@ -271,8 +276,9 @@ def test_np_random_seed_is_the_seed_the_env_plays(vector):
     np_random_seed says so (it was a random 128-bit number); a later plain reset keeps it, a
     reset(seed=k) makes it k."""
     for made_with, played in (({}, 0), ({"seed": 5}, 5), ({"seed": np.int64(5)}, 5)):
-        env = (gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, obs="ram", **made_with)
-               if vector else gym.make("stori_jax/Breakout-3.1-v0", obs="ram", **made_with))
+        kw = dict(obs="ram", num_workers=0, **made_with)
+        env = (gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, **kw) if vector
+               else gym.make("stori_jax/Breakout-3.1-v0", **kw))
         try:
             env.np_random  # read before the first reset (a wrapper may): gymnasium seeds it
             env.reset()    # at random, and the first reset still seeds it with the env's seed
@@ -320,7 +326,7 @@ def test_inside_a_daemonic_process_every_env_is_emulated_in_that_process():
     """gymnasium's async vector mode (and a DataLoader worker) runs each env in a daemonic
     process, which Python forbids to start processes: by default the env then starts no worker
     and gives the same run; asked for workers, it says why it cannot and what works."""
-    assert _in_a_daemonic_process(None) == _ram_digest(num_workers=1)
+    assert _in_a_daemonic_process(None) == _ram_digest(num_workers=0)
     message = _in_a_daemonic_process(1)
     assert message.startswith("RuntimeError: stori_jax.make cannot start its 1 emulator worker "
                               "process(es) inside a daemonic process"), message
@@ -367,7 +373,7 @@ def test_reset_after_a_worker_died_makes_the_env_again_from_its_seed():
     import signal
 
     env = gym.make("stori_jax/Breakout-2.1-v0", num_workers=1)
-    fresh = gym.make("stori_jax/Breakout-2.1-v0", num_workers=1)
+    fresh = gym.make("stori_jax/Breakout-2.1-v0", num_workers=0)
     try:
         env.reset()
         os.kill(env.unwrapped._env.backend.pids[0], signal.SIGKILL)
@@ -392,9 +398,9 @@ def test_a_reset_with_a_seed_that_a_dead_worker_stopped_keeps_the_seed():
     import os
     import signal
 
-    kw = dict(num_envs=2, obs="ram", noop_max=30, num_workers=1)  # first obs depends on the seed
-    envs = gym.make_vec("stori_jax/Breakout-3.1-v0", **kw)
-    fresh = gym.make_vec("stori_jax/Breakout-3.1-v0", **kw)
+    kw = dict(num_envs=2, obs="ram", noop_max=30)  # the first obs depends on the seed
+    envs = gym.make_vec("stori_jax/Breakout-3.1-v0", num_workers=1, **kw)
+    fresh = gym.make_vec("stori_jax/Breakout-3.1-v0", num_workers=0, **kw)
     try:
         envs.reset()
         os.kill(envs._env.backend.pids[0], signal.SIGKILL)
@@ -457,8 +463,9 @@ def test_the_fork_guard_takes_no_lock_in_the_child():
 def test_an_episode_cut_by_the_frame_cap_is_truncated_not_terminated(vector):
     """max_episode_frames=8 at frame_skip 4: the second step hits the cap, which gymnasium
     calls truncation (the game did not end: bootstrapping agents must tell the two apart)."""
-    env = (gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, obs="ram", max_episode_frames=8)
-           if vector else gym.make("stori_jax/Breakout-3.1-v0", obs="ram", max_episode_frames=8))
+    kw = dict(obs="ram", max_episode_frames=8, num_workers=0)
+    env = (gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, **kw) if vector
+           else gym.make("stori_jax/Breakout-3.1-v0", **kw))
     try:
         env.reset(seed=0)
         action = np.zeros(2, np.int64) if vector else 0
@@ -475,8 +482,9 @@ def test_an_episode_cut_by_the_frame_cap_is_truncated_not_terminated(vector):
 def test_a_plain_reset_goes_on_with_np_random_and_a_seed_restarts_it(vector):
     """As gymnasium's envs: reset(seed=k) reseeds np_random, a later reset() leaves it going on
     (np_random_seed still k), so an agent drawing from it does not replay its draws."""
-    env = (gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, obs="ram") if vector
-           else gym.make("stori_jax/Breakout-3.1-v0", obs="ram"))
+    kw = dict(obs="ram", num_workers=0)
+    env = (gym.make_vec("stori_jax/Breakout-3.1-v0", num_envs=2, **kw) if vector
+           else gym.make("stori_jax/Breakout-3.1-v0", **kw))
     try:
         env.reset(seed=3)
         first = env.np_random.random(4)
@@ -495,7 +503,7 @@ def test_the_step_that_resets_a_single_env_reports_reward_0():
     from _env_support import breakout_tracker
 
     def scoring_actions():  # follow the ball until a brick is hit
-        with gym.make("stori_jax/Breakout-3.1-v0", obs="ram") as env:
+        with gym.make("stori_jax/Breakout-3.1-v0", obs="ram", num_workers=0) as env:
             _, info = env.reset(seed=0)
             actions = []
             for _ in range(400):
@@ -507,7 +515,8 @@ def test_the_step_that_resets_a_single_env_reports_reward_0():
 
     actions, scored = scoring_actions()
     # the same game, cut by the frame cap on its scoring step
-    env = gym.make("stori_jax/Breakout-3.1-v0", obs="ram", max_episode_frames=4 * len(actions))
+    env = gym.make("stori_jax/Breakout-3.1-v0", obs="ram", max_episode_frames=4 * len(actions),
+                   num_workers=0)
     try:
         first, _ = env.reset(seed=0)
         for a in actions:
@@ -580,9 +589,9 @@ def test_a_vector_env_whose_worker_died_steps_only_after_a_reset_from_its_seed()
     import os
     import signal
 
-    kw = dict(num_envs=2, obs="ram", num_workers=1)
-    envs = gym.make_vec("stori_jax/Breakout-2.1-v0", **kw)
-    fresh = gym.make_vec("stori_jax/Breakout-2.1-v0", **kw)
+    kw = dict(num_envs=2, obs="ram")
+    envs = gym.make_vec("stori_jax/Breakout-2.1-v0", num_workers=1, **kw)
+    fresh = gym.make_vec("stori_jax/Breakout-2.1-v0", num_workers=0, **kw)
     actions = np.zeros(2, np.int64)
     try:
         envs.reset()
