@@ -49,15 +49,18 @@ def _cpu_ms(pid: int) -> float:
 
 def profile(game: str, preset: str, obs: str, batch: int, steps: int, before: bool) -> dict:
     """ms per step of each phase, and CPU ms per step of this process and of the workers."""
+    import inspect
+
     import jax
 
     import stori_jax
-    from stori_jax.builder import available_cores
 
     kwargs = {}
     if before:  # one chunk, and the split of before: this process emulates an equal share
-        workers = max(1, min(available_cores() - 1, batch - 1))
-        kwargs = dict(num_workers=workers, inline_envs=batch // (workers + 1), chunks=1)
+        workers = max(1, min(len(os.sched_getaffinity(0)) - 1, batch - 1))
+        kwargs = dict(num_workers=workers, inline_envs=batch // (workers + 1))
+        if "chunks" in inspect.signature(stori_jax.make).parameters:
+            kwargs["chunks"] = 1
     env = stori_jax.make(game, preset, num_envs=batch, seed=0, obs=obs, **kwargs)
     spent = dict.fromkeys(PHASES, 0.0)
 
@@ -75,7 +78,8 @@ def profile(game: str, preset: str, obs: str, batch: int, steps: int, before: bo
     for emulator in inline:
         emulator.step = timed("emulate here", emulator.step)
     backend._wait_all = timed("wait", backend._wait_all)
-    env._finish_part = timed("dispatch", env._finish_part)
+    if hasattr(env, "_finish_part"):  # chunked: each chunk's JAX work is dispatched apart
+        env._finish_part = timed("dispatch", env._finish_part)
     recv_total = [0.0]
     rng = np.random.default_rng(0)
     try:
@@ -108,7 +112,8 @@ def profile(game: str, preset: str, obs: str, batch: int, steps: int, before: bo
     spent["finish"] = recv_total[0] - in_recv
     per_step = {phase: 1000 * spent[phase] / steps for phase in PHASES}
     return dict(game=game, preset=preset, obs=obs, B=batch, mode="before" if before else "now",
-                inline_envs=len(inline), workers=len(pids), chunks=len(backend.chunks),
+                inline_envs=len(inline), workers=len(pids),
+                chunks=len(getattr(backend, "chunks", [None])),
                 steps_per_s=steps * batch / wall, wall_ms_per_step=1000 * wall / steps,
                 phases_ms=per_step, cpu_ms_here=cpu_here / steps,
                 cpu_ms_workers=cpu_workers / steps)
@@ -139,19 +144,21 @@ def main(argv=None):
     parser.add_argument("--obs", nargs="+", default=["raw", "atari84"])
     parser.add_argument("--batch", type=int, default=32)
     parser.add_argument("--steps", type=int, default=300, help="timed steps per run (default 300)")
+    parser.add_argument("--modes", nargs="+", choices=["before", "now"], default=["before", "now"],
+                        help="the split and chunks of before pipelining, and/or today's defaults")
     parser.add_argument("--out", type=Path, default=HERE / "results")
     args = parser.parse_args(argv)
     output_directory(parser, args.out)
-    from stori_jax.builder import available_cores
     from stori_jax.provenance import software
 
     rows = []
     for preset in args.presets:
         for obs in args.obs:
-            for before in (True, False):
-                rows.append(profile(args.game, preset, obs, args.batch, args.steps, before))
+            for mode in args.modes:
+                rows.append(profile(args.game, preset, obs, args.batch, args.steps,
+                                    mode == "before"))
     meta = dict(date=datetime.date.today().isoformat(), host=socket.gethostname(),
-                cores=available_cores(), load=os.getloadavg(), software=software(),
+                cores=len(os.sched_getaffinity(0)), load=os.getloadavg(), software=software(),
                 argv=sys.argv[1:] if argv is None else list(argv))
     args.out.mkdir(parents=True, exist_ok=True)
     stem = args.out / f"profile-{meta['date']}-{meta['host']}"
