@@ -45,11 +45,11 @@ PART_FILE = "part.json"  # beside it: how far the run had trained
 DEFAULT_SEEDS = (0, 7, 13)  # the paper's
 DEFAULT_STEPS = 100_000  # the paper's budget, agent steps
 DEFAULT_OUT = Path("results") / "grid"
-DEFAULT_PARTS = 4  # a trainable agent's run is trained (and checkpointed to Tune) in this many parts
+DEFAULT_PARTS = 4  # a trained run is trained (and checkpointed to Tune) in this many parts
 DEFAULT_MAX_FAILURES = 3  # Tune retries a trial whose process died this many times
-TABLE_EVERY_S = 10.0  # the table is rewritten at most this often while trials finish (and at the end)
+TABLE_EVERY_S = 10.0  # the table is rewritten at most this often as trials finish (and at the end)
 INSTALL = ("stori-jax grid runs on Ray Tune, an optional extra: pip install -e \".[ray]\" in a "
-           "checkout of stori-jax, or pip install \"ray[tune]>=2.40\"")
+           "checkout of stori-jax, or pip install \"ray[tune,client]>=2.40\"")
 INTERRUPTED = 130
 
 
@@ -300,12 +300,30 @@ def reusable_result(path: Path, wanted: dict, checkpoint: Path | None) -> dict |
     return result
 
 
+OMP_NUM_THREAD_VARIABLE = "STORI_JAX_GRID_OMP_NUM_THREADS"  # the driver's OMP_NUM_THREADS
+
+
+def keep_omp_as_the_driver_has_it() -> None:
+    """OMP_NUM_THREADS as the grid's driver has it (unset, unless set there), not as Ray set it
+    for the worker (the trial's CPUs): XLA's OpenMP-threaded CPU kernels round differently
+    with another thread count, and a trial must compute what `stori-jax train` computes.  Done
+    before this process first uses JAX (OpenMP reads the variable when it starts)."""
+    wanted = os.environ.get(OMP_NUM_THREAD_VARIABLE)
+    if wanted is None:  # not started by the grid's connect(): nothing known to restore
+        return
+    if wanted:
+        os.environ["OMP_NUM_THREADS"] = wanted
+    else:
+        os.environ.pop("OMP_NUM_THREADS", None)
+
+
 def tune_trial(config: dict) -> None:
     """The Tune trainable: :func:`play_trial` inside a Ray worker, its emulators held to the
     CPUs Ray reserved for the trial.  A ValueError (the trial cannot run as asked: it would
     fail again the same way) ends the trial with its message as its result, not as an error
     for Tune to retry; anything else (a crash, a lost node) is Tune's to retry from the last
     checkpoint."""
+    keep_omp_as_the_driver_has_it()  # first: before anything imports JAX
     import ray
     from ray import tune
 
@@ -549,7 +567,16 @@ def connect(address: str | None) -> bool:
 
     if ray.is_initialized():
         return False
-    quiet = dict(log_to_driver=False, logging_level=logging.WARNING)
+    # Ray starts its workers at niceness 15, below every other process: the trials are the
+    # work here (as `stori-jax train` is), so they run at the usual priority.  And Ray sets
+    # OMP_NUM_THREADS to a trial's CPUs where it is unset, which changes XLA's float rounding
+    # on CPU (its OpenMP-threaded kernels reduce in another order): the trials get the
+    # driver's setting back (OMP_NUM_THREAD_VARIABLE, read by tune_trial), so that they compute
+    # exactly what `stori-jax train` run from the same shell computes
+    env = {"RAY_worker_niceness": "0",
+           OMP_NUM_THREAD_VARIABLE: os.environ.get("OMP_NUM_THREADS", "")}
+    quiet = dict(log_to_driver=False, logging_level=logging.WARNING,
+                 runtime_env={"env_vars": env})
     if address is None:
         from baselines.runs import cores
 
@@ -753,9 +780,10 @@ def add_parser(sub) -> None:
                            "experiment in tune/; on a cluster, storage every node mounts at "
                            "this path")
     grid.add_argument("--address", default=None,
-                      help="a running Ray cluster: auto (the one this machine belongs to) or "
-                           "HOST:PORT of its head (default: start Ray here, on this machine's "
-                           "cores)")
+                      help="a running Ray cluster: auto (the one this machine belongs to), "
+                           "HOST:PORT of its head, or ray://HOST:PORT (Ray Client: the grid is "
+                           "driven from the head; --out is the cluster's path) (default: start "
+                           "Ray here, on this machine's cores; docs/cluster.md)")
     grid.add_argument("--cpus-per-run", type=float, default=1,
                       help="CPUs Ray reserves per trial; its emulator workers use as many "
                            "(default 1)")

@@ -24,9 +24,10 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from baselines import runs
 from baselines.agents import Agent
 from baselines.evaluate import CHECKPOINT_POLICIES, stori_game
-from baselines.runs import (append_csv, check_no_finished_run, check_no_run_here,  # noqa: F401
+from baselines.runs import (RunConfig, append_csv, check_no_finished_run, check_no_run_here,  # noqa: F401
                             read_checkpoint, recorded_parts, rewrite_csv, rows_upto,
                             save_checkpoint, software_parts, write_summary)
 from stori_jax.checks import check_int, check_real
@@ -50,8 +51,10 @@ TIMING_FIELDS = ("sps", "rollout_sps", "update_s")
 # -- hyperparameters ------------------------------------------------------------------------------
 
 @dataclasses.dataclass(frozen=True)
-class PPOConfig:
+class PPOConfig(RunConfig):
     """CleanRL's Atari defaults; ``total_steps`` counts agent steps summed over the envs."""
+
+    TITLE = "PPO"
 
     game: str = "Breakout"
     preset: str = "3.1"
@@ -136,36 +139,6 @@ class PPOConfig:
             raise ValueError(f"action_head='factored' needs a game that plays ALE's full "
                              f"{len(FULL_ACTION_SET)} actions (e.g. Boxing, BankHeist); "
                              f"{self.game} has {num_actions}: use action_head='joint'")
-
-    @classmethod
-    def from_recorded(cls, recorded: dict) -> "PPOConfig":
-        """The config a run recorded (config.json, a checkpoint).  A field added since the run
-        was recorded takes its default, which is what the run was trained with."""
-        unknown = sorted(set(recorded) - {f.name for f in dataclasses.fields(cls)})
-        if unknown:
-            raise ValueError(f"recorded PPO config has unknown fields {unknown}")
-        return cls(**recorded)
-
-    @classmethod
-    def from_overrides(cls, base: "PPOConfig", overrides: dict[str, str]) -> "PPOConfig":
-        """``base`` with ``field=value`` strings from the command line, typed by the field."""
-        fields = {f.name: f for f in dataclasses.fields(cls)}
-        typed = {}
-        for name, text in overrides.items():
-            if name not in fields:
-                raise ValueError(f"unknown PPO hyperparameter {name!r}; known: {sorted(fields)}")
-            kind = type(getattr(base, name))
-            if kind is bool:
-                if text.lower() not in ("true", "false", "1", "0"):
-                    raise ValueError(f"{name} must be true or false, got {text!r}")
-                typed[name] = text.lower() in ("true", "1")
-            else:
-                try:
-                    typed[name] = kind(text)
-                except ValueError:
-                    kind_name = {int: "an int", float: "a number"}.get(kind, kind.__name__)
-                    raise ValueError(f"{name} must be {kind_name}, got {text!r}") from None
-        return dataclasses.replace(base, **typed)
 
 
 # -- network --------------------------------------------------------------------------------------
@@ -499,21 +472,8 @@ def load_checkpoint(path: Path) -> dict:
 
 def check_checkpoint(payload: dict, path: Path) -> dict:
     """``payload`` (read from ``path``) if it is a PPO checkpoint; a ValueError saying why not."""
-    def refuse(why: str):
-        return ValueError(f"not a stori-jax PPO checkpoint: {path} ({why})")
-
-    if payload["format"] != CHECKPOINT_FORMAT:
-        raise refuse(f"no format {CHECKPOINT_FORMAT!r} marker")
-    missing = [k for k in ("config", "params") if k not in payload]
-    if missing:
-        raise refuse(f"lacks {missing}")
-    if not isinstance(payload["config"], dict):
-        raise refuse("its config is not a dict")
-    try:
-        PPOConfig.from_recorded(payload["config"])
-    except (ValueError, TypeError) as e:
-        raise refuse(f"bad config: {e}") from None
-    return payload
+    return runs.check_checkpoint(payload, path, checkpoint_format=CHECKPOINT_FORMAT,
+                                 config_class=PPOConfig)
 
 
 # -- training -------------------------------------------------------------------------------------
@@ -521,21 +481,8 @@ def check_checkpoint(payload: dict, path: Path) -> dict:
 def _checked_checkpoint(config: PPOConfig, ckpt_path: Path, stop_after: int | None) -> dict:
     """The checkpoint a resume continues: trained under ``config``, with all a run needs, and
     not beyond ``stop_after``."""
-    ckpt = load_checkpoint(ckpt_path)
-    recorded = dataclasses.asdict(PPOConfig.from_recorded(ckpt["config"]))
-    differ = [f"{k} {recorded[k]!r} there, {v!r} now"
-              for k, v in dataclasses.asdict(config).items() if recorded[k] != v]
-    if differ:
-        raise ValueError(f"cannot resume from {ckpt_path}: it was trained with a different "
-                         "config: " + "; ".join(differ))
-    missing = [k for k in RESUME_STATE if k not in ckpt]
-    if missing:
-        raise ValueError(f"cannot resume from {ckpt_path}: it lacks {missing}, which a run "
-                         "needs to continue")
-    if stop_after is not None and stop_after < ckpt["iteration"]:
-        raise ValueError(f"stop_after {stop_after} is before {ckpt_path}'s iteration "
-                         f"{ckpt['iteration']}: a run cannot go back")
-    return ckpt
+    return runs.resumable(load_checkpoint(ckpt_path), config, ckpt_path, RESUME_STATE,
+                          stop_after)
 
 
 def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool = True,

@@ -5,6 +5,7 @@ resumed run was trained with."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import os
 import pickle
 import warnings
@@ -47,6 +48,83 @@ def read_checkpoint(path: Path, what: str = "stori-jax") -> dict:
     if not isinstance(payload, dict) or not isinstance(payload.get("format"), str):
         raise refuse("no format marker")
     return payload
+
+
+class RunConfig:
+    """What an agent's frozen config dataclass shares: reading it back from a run, and
+    ``--set FIELD=VALUE`` overrides typed by the field.  ``TITLE`` names the agent in errors."""
+
+    TITLE = "agent"
+
+    @classmethod
+    def from_recorded(cls, recorded: dict):
+        """The config a run recorded (config.json, a checkpoint).  A field added since the run
+        was recorded takes its default, which is what the run was trained with."""
+        unknown = sorted(set(recorded) - {f.name for f in dataclasses.fields(cls)})
+        if unknown:
+            raise ValueError(f"recorded {cls.TITLE} config has unknown fields {unknown}")
+        return cls(**recorded)
+
+    @classmethod
+    def from_overrides(cls, base, overrides: dict[str, str]):
+        """``base`` with ``field=value`` strings from the command line, typed by the field."""
+        fields = {f.name for f in dataclasses.fields(cls)}
+        typed = {}
+        for name, text in overrides.items():
+            if name not in fields:
+                raise ValueError(f"unknown {cls.TITLE} hyperparameter {name!r}; known: "
+                                 f"{sorted(fields)}")
+            kind = type(getattr(base, name))
+            if kind is bool:
+                if text.lower() not in ("true", "false", "1", "0"):
+                    raise ValueError(f"{name} must be true or false, got {text!r}")
+                typed[name] = text.lower() in ("true", "1")
+            else:
+                try:
+                    typed[name] = kind(text)
+                except ValueError:
+                    kind_name = {int: "an int", float: "a number"}.get(kind, kind.__name__)
+                    raise ValueError(f"{name} must be {kind_name}, got {text!r}") from None
+        return dataclasses.replace(base, **typed)
+
+
+def check_checkpoint(payload: dict, path: Path, *, checkpoint_format: str, config_class) -> dict:
+    """``payload`` (read from ``path``) if it is a checkpoint of ``checkpoint_format`` with a
+    config ``config_class`` reads; a ValueError saying why not."""
+    def refuse(why: str):
+        return ValueError(f"not a stori-jax {config_class.TITLE} checkpoint: {path} ({why})")
+
+    if payload["format"] != checkpoint_format:
+        raise refuse(f"no format {checkpoint_format!r} marker")
+    missing = [k for k in ("config", "params") if k not in payload]
+    if missing:
+        raise refuse(f"lacks {missing}")
+    if not isinstance(payload["config"], dict):
+        raise refuse("its config is not a dict")
+    try:
+        config_class.from_recorded(payload["config"])
+    except (ValueError, TypeError) as e:
+        raise refuse(f"bad config: {e}") from None
+    return payload
+
+
+def resumable(ckpt: dict, config, path: Path, resume_state, stop_after: int | None) -> dict:
+    """``ckpt`` if a run of ``config`` can continue from it: trained under ``config``, holding
+    every key of ``resume_state``, and not beyond ``stop_after`` iterations."""
+    recorded = dataclasses.asdict(type(config).from_recorded(ckpt["config"]))
+    differ = [f"{k} {recorded[k]!r} there, {v!r} now"
+              for k, v in dataclasses.asdict(config).items() if recorded[k] != v]
+    if differ:
+        raise ValueError(f"cannot resume from {path}: it was trained with a different "
+                         "config: " + "; ".join(differ))
+    missing = [k for k in resume_state if k not in ckpt]
+    if missing:
+        raise ValueError(f"cannot resume from {path}: it lacks {missing}, which a run "
+                         "needs to continue")
+    if stop_after is not None and stop_after < ckpt["iteration"]:
+        raise ValueError(f"stop_after {stop_after} is before {path}'s iteration "
+                         f"{ckpt['iteration']}: a run cannot go back")
+    return ckpt
 
 
 def rewrite_csv(path: Path, fields, rows) -> None:

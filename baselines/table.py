@@ -26,7 +26,7 @@ from baselines.evaluate import CHECKPOINT_POLICIES, stori_game
 from stori_jax.checks import MAX_SEED, check_int, check_real
 from stori_jax.presets import canonical_preset
 
-# STORI_SPEC section 11: mean evaluation return ± std over seeds 0, 7, 13 at 100k agent steps
+# docs/spec.md section 11: mean evaluation return ± std over seeds 0, 7, 13 at 100k agent steps
 PAPER_RESULTS = {  # (game, preset): (DreamerV3 mean, std, STORM mean, std)
     ("Breakout", "1"): (8.67, 0.30, 9.20, 1.72),
     ("Breakout", "2.1"): (13.80, 3.26, 16.44, 2.03),
@@ -55,13 +55,13 @@ PAPER_RESULTS = {  # (game, preset): (DreamerV3 mean, std, STORM mean, std)
 }
 PAPER_AGENT_STEPS = 100_000  # the paper's training budget per run
 # presets whose paper numbers came from the reference's environment with a defect that changes
-# the game, which this project corrects (STORI_SPEC marks the reference's defects)
+# the game, which this project corrects (docs/spec.md marks the reference's defects)
 PAPER_ENVIRONMENT_DIFFERS = {
     ("Gopher", "2.1"): "the reference's 'hole stays open' rule mostly undid the gopher's "
-                       "digging (STORI_SPEC section 7, the likely cause of DreamerV3's 11333); "
+                       "digging (docs/spec.md section 7, the likely cause of DreamerV3's 11333); "
                        "here it undoes only the farmer's fills",
     ("BankHeist", "2.1"): "the reference's city switch dropped the player back to an early "
-                          "level; here the level is kept (STORI_SPEC section 8)",
+                          "level; here the level is kept (docs/spec.md section 8)",
 }
 EVAL_KEYS = ("game", "preset", "agent", "policy", "train_seed", "mean_return", "episodes")
 RANDOM_COLUMN = "Random"  # the random policy's column, after the trained agents'

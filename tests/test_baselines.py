@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import functools
 import json
 import pickle
 import re
@@ -35,14 +36,20 @@ def tiny(**kw) -> ppo.PPOConfig:
     return ppo.PPOConfig(**{**TINY, **kw})
 
 
+def random_frames(n, seed=0):
+    """``n`` stacks of 84x84x4 random uint8 frames (numpy: a large jax.random draw takes XLA
+    seconds to compile)."""
+    return np.random.default_rng(seed).integers(0, 256, (n, 84, 84, 4), dtype=np.uint8)
+
+
 # -- network and update -----------------------------------------------------------------------
 
 @pytest.mark.parametrize("features,kernel,stride,size", [(32, 8, 4, 84), (64, 4, 2, 20),
                                                          (64, 3, 1, 9)])
 def test_conv_is_the_usual_convolution(features, kernel, stride, size):
-    x = jax.random.uniform(jax.random.PRNGKey(0), (2, size, size, 5))
+    x = np.random.default_rng(0).uniform(size=(2, size, size, 5)).astype(np.float32)
     conv = ppo.Conv(features, kernel, stride)
-    params = conv.init(jax.random.PRNGKey(1), x)
+    params = jax.jit(conv.init)(jax.random.PRNGKey(1), x)
     dense = params["params"]["Dense_0"]
     k = kernel // stride
     # the dense kernel's rows, regrouped as the (kernel, kernel, in, out) conv kernel
@@ -50,13 +57,14 @@ def test_conv_is_the_usual_convolution(features, kernel, stride, size):
     w = w.reshape(kernel, kernel, 5, features)
     expected = jax.lax.conv_general_dilated(x, w, (stride, stride), "VALID",
                                             dimension_numbers=("NHWC", "HWIO", "NHWC"))
-    np.testing.assert_allclose(conv.apply(params, x), expected + dense["bias"], rtol=1e-4,
-                               atol=1e-4)
+    np.testing.assert_allclose(jax.jit(conv.apply)(params, x), expected + dense["bias"],
+                               rtol=1e-4, atol=1e-4)
 
 
 def test_nature_torso_has_the_nature_shapes():
     net = ppo.ActorCritic(num_actions=4, network="nature")
-    params = net.init(jax.random.PRNGKey(0), jnp.zeros((1, 84, 84, 4), jnp.uint8))
+    params = jax.eval_shape(net.init, jax.random.PRNGKey(0), jnp.zeros((1, 84, 84, 4),
+                                                                       jnp.uint8))
     sizes = [p["Dense_0"]["kernel"].shape for name, p in params["params"].items()
              if name.startswith("Conv")]
     assert sizes == [(8 * 8 * 4, 32), (4 * 4 * 32, 64), (3 * 3 * 64, 64)]
@@ -70,11 +78,11 @@ def test_factored_head_is_a_direction_distribution_times_a_fire_distribution():
     assert tuple(table[ppo.FULL_ACTION_SET.index("DOWNLEFTFIRE")]) == tuple(
         table[ppo.FULL_ACTION_SET.index("DOWNLEFT")] + [0, 1])
     net = ppo.ActorCritic(num_actions=18, network="tiny", action_head="factored")
-    obs = jax.random.randint(jax.random.PRNGKey(0), (3, 84, 84, 4), 0, 256).astype(jnp.uint8)
-    params = net.init(jax.random.PRNGKey(1), obs)
+    obs = random_frames(3)
+    params = jax.jit(net.init)(jax.random.PRNGKey(1), obs)
     # larger head weights, so that the two factors are far from uniform
     params = jax.tree.map(lambda p: p * 300, params)
-    probs = np.exp(np.asarray(net.apply(params, obs)[0], np.float64))
+    probs = np.exp(np.asarray(jax.jit(net.apply)(params, obs)[0], np.float64))
     np.testing.assert_allclose(probs.sum(axis=1), 1.0, rtol=1e-5)
     by_fire_direction = np.zeros((3, 2, 9))
     for action, (direction, fire) in enumerate(table):
@@ -85,47 +93,51 @@ def test_factored_head_is_a_direction_distribution_times_a_fire_distribution():
     assert np.ptp(p_fire[..., 0]) > 0.05, "the factors depend on the observation"
 
 
-def synthetic_rollout(config, network, params, seed=0):
-    k = jax.random.split(jax.random.PRNGKey(seed), 4)
+@functools.partial(jax.jit, static_argnums=(0, 1))
+def synthetic_batch(config, network, params, obs):
+    """(rollout of the policy on the frames ``obs`` (T, B, ...), its last observation, the flat
+    minibatch ppo_loss takes), in one compiled call."""
+    k = jax.random.split(jax.random.PRNGKey(0), 4)
     t, b = config.num_steps, config.num_envs
-    obs = jax.random.randint(k[0], (t, b, 84, 84, 4), 0, 256).astype(jnp.uint8)
     action, logp, value = jax.vmap(lambda o, kk: ppo.act(network, params, o, kk))(
         obs, jax.random.split(k[1], t))
     reward = jnp.sign(jax.random.normal(k[2], (t, b))) * (jax.random.uniform(k[3], (t, b)) < .3)
     done = jnp.zeros((t, b), bool).at[t // 2, 0].set(True)
-    return ppo.Rollout(obs, action, logp, value, reward, done)
+    rollout = ppo.Rollout(obs, action, logp, value, reward, done)
+    _, last_value = network.apply(params, obs[-1])
+    advantages, targets = ppo.gae(rollout, last_value, config.gamma, config.gae_lambda)
+    flat = jax.tree.map(lambda x: x.reshape(config.batch_size, *x.shape[2:]),
+                        (obs, action, logp, value, advantages, targets))
+    return rollout, obs[-1], flat
 
 
 @pytest.mark.parametrize("augment_shift,game,action_head,learning_rate", [
-    (0, "Breakout", "joint", 1e-3), (4, "Breakout", "joint", 1e-3),
-    (0, "Boxing", "factored", 2.5e-4),  # at 1e-3 this batch's clipped value loss overshoots
+    (0, "Breakout", "joint", 1e-3),
+    (4, "Boxing", "factored", 2.5e-4),  # at 1e-3 this batch's clipped value loss overshoots
 ])
 def test_an_update_lowers_the_loss_on_a_fixed_batch(augment_shift, game, action_head,
                                                      learning_rate):
     config = tiny(learning_rate=learning_rate, update_epochs=4, augment_shift=augment_shift,
                   game=game, action_head=action_head)
     network = ppo.make_network(config, stori_jax.get_game(game).num_actions)
-    params = network.init(jax.random.PRNGKey(0), jnp.zeros((1, 84, 84, 4), jnp.uint8))
+    params = jax.jit(network.init)(jax.random.PRNGKey(0), jnp.zeros((1, 84, 84, 4), jnp.uint8))
     optimizer = ppo.make_optimizer(config)
-    rollout = synthetic_rollout(config, network, params)
-    last_obs = rollout.obs[-1]
-    _, last_value = network.apply(params, last_obs)
-    advantages, targets = ppo.gae(rollout, last_value, config.gamma, config.gae_lambda)
-    flat = jax.tree.map(lambda x: x.reshape(config.batch_size, *x.shape[2:]),
-                        (rollout.obs, rollout.action, rollout.logp, rollout.value, advantages,
-                         targets))
-    before, _ = ppo.ppo_loss(network, config, params, flat)
+    frames = random_frames(config.num_steps * config.num_envs).reshape(
+        config.num_steps, config.num_envs, 84, 84, 4)
+    rollout, last_obs, flat = synthetic_batch(config, network, params, frames)
+    loss = jax.jit(lambda params: ppo.ppo_loss(network, config, params, flat)[0])
+    before = loss(params)
     update = ppo.make_update(network, optimizer, config)
     new_params, _, metrics = update(params, optimizer.init(params), rollout, last_obs,
                                     jax.random.PRNGKey(1))
-    after, _ = ppo.ppo_loss(network, config, new_params, flat)
+    after = loss(new_params)
     assert float(after) < float(before) - 1e-3, (before, after)
     assert 0 <= float(metrics["clipfrac"]) <= 1 and np.isfinite(float(metrics["approx_kl"]))
 
 
 def test_random_shift_crops_the_edge_padded_frames_at_offsets_within_the_pad():
     pad = 3
-    obs = jax.random.randint(jax.random.PRNGKey(0), (32, 84, 84, 4), 0, 256).astype(jnp.uint8)
+    obs = jnp.asarray(random_frames(32))
     shifted = np.asarray(ppo.random_shift(obs, jax.random.PRNGKey(1), pad))
     assert shifted.shape == obs.shape and shifted.dtype == np.uint8
     padded = np.pad(np.asarray(obs), ((0, 0), (pad, pad), (pad, pad), (0, 0)), mode="edge")
@@ -540,7 +552,7 @@ def test_resuming_a_finished_run_touches_no_file(uninterrupted, monkeypatch):
         warnings.simplefilter("error")
         again = ppo.train(tiny(), full, progress=False, resume=True)
     assert {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in full.iterdir()} == files
-    assert again == dict(summary, iterations_now=0)
+    assert again == dict(summary, iterations_now=0, agent_steps_now=0)
 
 
 def test_resuming_a_run_stopped_before_its_summary_writes_it(uninterrupted, tmp_path):
@@ -557,14 +569,24 @@ def test_resuming_a_run_stopped_before_its_summary_writes_it(uninterrupted, tmp_
         (full / "summary.json").read_text())
 
 
-@pytest.fixture
-def staged(uninterrupted, tmp_path):
-    """run_long.py's stages (1 and 2) of the tiny run, trained into tmp_path/run."""
+@pytest.fixture(scope="module")
+def staged_once(tmp_path_factory):
+    """run_long.py's stages (1 and 2) of the tiny run (trained once per module)."""
     from baselines import run_long
 
-    run, by_step = tmp_path / "run", tmp_path / "by-step"
+    root = tmp_path_factory.mktemp("staged")
+    run, by_step = root / "run", root / "by-step"
     run_long.train_in_stages(tiny(), run, by_step, stages=(1, 2), episodes=2, num_envs=2,
                              progress=False)
+    return run, by_step
+
+
+@pytest.fixture
+def staged(staged_once, tmp_path):
+    """A copy of the staged run in tmp_path (its run and by-step folders), for a test to change."""
+    run, by_step = tmp_path / "run", tmp_path / "by-step"
+    shutil.copytree(staged_once[0], run)
+    shutil.copytree(staged_once[1], by_step)
     return run, by_step
 
 
@@ -582,14 +604,14 @@ def count_calls(monkeypatch):
 
 
 def test_a_run_trained_in_stages_is_the_uninterrupted_run_with_each_stage_evaluated(
-        uninterrupted, staged, tmp_path, monkeypatch):
+        uninterrupted, staged_once, tmp_path, monkeypatch):
     """The run ends as the uninterrupted one; each stage's checkpoint is the one a run stopped
     there holds, evaluated with its own progress; a second call trains and evaluates
     nothing."""
     from baselines import run_long
 
     full, _ = uninterrupted
-    run, by_step = staged
+    run, by_step = staged_once
     assert read_log(run) == read_log(full)
     assert (run / "episodes.csv").read_text() == (full / "episodes.csv").read_text()
     stopped = tmp_path / "stopped"
@@ -604,7 +626,7 @@ def test_a_run_trained_in_stages_is_the_uninterrupted_run_with_each_stage_evalua
         assert (result["trained_agent_steps"], result["run_finished"]) == (steps, finished)
         assert result["episodes"] == 2 and result["eval_seed"] == 10_000
         assert result["checkpoint"] == str((where / "checkpoint.pkl").resolve())  # not ours
-    assert not list(tmp_path.rglob("*.tmp"))
+    assert not list(run.parent.rglob("*.tmp")) and not list(tmp_path.rglob("*.tmp"))
     calls = count_calls(monkeypatch)
     run_long.train_in_stages(tiny(), run, by_step, stages=(1, 2), episodes=2, num_envs=2,
                              progress=False)
@@ -1133,8 +1155,8 @@ def test_greedy_acts_by_the_argmax_and_sampled_draws_from_the_policy(uninterrupt
     _, sampled = ppo.load_policy(full / "checkpoint.pkl", "sampled")
     network = ppo.make_network(config, 4)
     params = ppo.load_checkpoint(full / "checkpoint.pkl")["params"]
-    obs = jax.random.randint(jax.random.PRNGKey(0), (16, 84, 84, 4), 0, 256).astype(jnp.uint8)
-    logits, _ = network.apply(params, obs)
+    obs = jnp.asarray(random_frames(16))
+    logits, _ = jax.jit(network.apply)(params, obs)
     draws = []
     for key in jax.random.split(jax.random.PRNGKey(1), 8):
         np.testing.assert_array_equal(greedy(obs, key), np.argmax(logits, axis=-1))
@@ -1225,11 +1247,11 @@ def test_the_table_notes_other_budgets_unfinished_runs_and_the_papers_other_envi
     table = json.loads((tmp_path / "out" / "table.json").read_text())
     assert table["notes"] == [
         "Gopher 2.1: the paper's numbers come from another environment: the reference's "
-        "'hole stays open' rule mostly undid the gopher's digging (STORI_SPEC section 7, the "
+        "'hole stays open' rule mostly undid the gopher's digging (docs/spec.md section 7, the "
         "likely cause of DreamerV3's 11333); here it undoes only the farmer's fills",
         "BankHeist 2.1: the paper's numbers come from another environment: the reference's "
         "city switch dropped the player back to an early level; here the level is kept "
-        "(STORI_SPEC section 8)",
+        "(docs/spec.md section 8)",
         "Gopher 2.1 PPO: checkpoints of unfinished runs (seed 7: 1024 of 12288 agent steps)",
         "Gopher 2.1 PPO seed(s) [7]: runs of 12288 agent steps (the paper's: 100000)",
         "Gopher 2.1 PPO seed(s) [13]: runs of 1000000 agent steps (the paper's: 100000)",

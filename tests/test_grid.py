@@ -3,8 +3,7 @@ second run runs nothing again, a bad --set fails only its own trials, and a tria
 process is killed mid-run resumes from its Tune checkpoint and ends bit-identical to the same
 run made by ``stori-jax train`` + ``eval`` alone.  (The multi-node case: test_grid_cluster.py.)
 
-One local Ray serves the module (starting one costs seconds on 2 cores); each grid runs once
-in a fixture, its tests check what it left."""
+One local Ray serves the module's process (starting one costs seconds on 2 cores)."""
 
 from __future__ import annotations
 
@@ -27,7 +26,9 @@ from stori_jax.cli import main
 ray = pytest.importorskip("ray", reason="the grid runs on Ray Tune (pip install -e '.[ray]')")
 tune = pytest.importorskip("ray.tune")
 
-TINY = ["network=tiny", "num_envs=4", "num_steps=8", "num_minibatches=2", "update_epochs=1"]
+# the Mnih-2013 torso: its update is large enough for XLA's OpenMP-threaded kernels, whose
+# rounding changes with OMP_NUM_THREADS (Ray sets it in its workers; the grid undoes that)
+SMALL = ["network=nips", "num_envs=4", "num_steps=8", "num_minibatches=2", "update_epochs=1"]
 STEPS = 64  # 2 iterations of 4 envs x 8 steps, trained in 2 parts
 EVAL = ["--eval-episodes", "1", "--max-episode-frames", "400"]  # episodes cut at 100 steps
 
@@ -67,23 +68,21 @@ def same_run(a: Path, b: Path) -> None:
 
 
 # -- the random policy over presets x seeds ---------------------------------------------------
+# (one test per grid: pytest-xdist hands tests to its processes one by one, and a grid shared
+# by several tests through a fixture would be run again in each process that gets one)
 
-@pytest.fixture(scope="module")
-def random_grid(local_ray, tmp_path_factory):
-    out = tmp_path_factory.mktemp("random-grid")
+def test_a_grid_ends_with_the_complete_table_and_running_it_again_runs_nothing(
+        local_ray, tmp_path, capsys):
+    out = tmp_path / "grid"
     argv = ["grid", "--agent", "random", "--games", "Breakout", "--presets", "1", "3.1",
             "--seeds", "0", "7", *EVAL, "--out", str(out), "--quiet"]
-    code = main(argv)
-    return out, argv, code
-
-
-def test_a_grid_ends_with_the_complete_table(random_grid, capsys):
-    out, _, code = random_grid
-    assert code == 0
+    assert main(argv) == 0
     table = json.loads((out / "table.json").read_text())
     assert [(r["game"], r["preset"], r["Random"]["seeds"]) for r in table["rows"]] == [
         ("Breakout", "1", [0, 7]), ("Breakout", "3.1", [0, 7])]
     assert (out / "table.md").exists()
+    assert json.loads((out / grid.SPEC_FILE).read_text())["runs"] == [
+        ["Breakout", "1", 0], ["Breakout", "1", 7], ["Breakout", "3.1", 0], ["Breakout", "3.1", 7]]
     # each trial's file is where `stori-jax eval --random` files it, and what eval gives alone
     from baselines.evaluate import evaluate
 
@@ -93,28 +92,20 @@ def test_a_grid_ends_with_the_complete_table(random_grid, capsys):
                      .read_text())
     for key in ("returns", "lengths", "mean_return", "eval_seed", "train_seed", "truncated"):
         assert ran[key] == alone[key], key
-    assert json.loads((out / grid.SPEC_FILE).read_text())["runs"] == [
-        ["Breakout", "1", 0], ["Breakout", "1", 7], ["Breakout", "3.1", 0], ["Breakout", "3.1", 7]]
 
-
-def test_running_a_finished_grid_again_runs_nothing(random_grid, capsys):
-    out, argv, _ = random_grid
+    # the same command again: Tune restores the experiment, and no trial runs
     evals = sorted(out.rglob("eval-random.json"))
     before = {p: p.stat().st_mtime_ns for p in evals}
     results = sorted((out / grid.TUNE_DIR).rglob("result.json"))
     reported = {p: p.read_text() for p in results}
     capsys.readouterr()
     assert main(argv) == 0
-    printed = capsys.readouterr().out
-    assert "4 of 4 trials finished (resumed;" in printed
+    assert "4 of 4 trials finished (resumed;" in capsys.readouterr().out
     assert {p: p.stat().st_mtime_ns for p in evals} == before
     assert {p: p.read_text() for p in results} == reported  # no trial reported anything
 
-
-def test_a_grid_of_other_settings_is_refused_in_a_grids_folder(random_grid, capsys):
-    out, argv, _ = random_grid
-    other = [a if a != "7" else "13" for a in argv]
-    assert main(other) == 2
+    # other settings into the same folder: refused
+    assert main([a if a != "7" else "13" for a in argv]) == 2
     err = capsys.readouterr().err
     assert f"--out {out} holds a grid of other settings (runs" in err
     assert "run the same command to resume it, or give another --out" in err
@@ -140,43 +131,35 @@ class KillOnce(tune.Callback):
         self.recovered += 1
 
 
-@pytest.fixture(scope="module")
-def ppo_grid(local_ray, tmp_path_factory):
+def test_a_bad_set_fails_its_own_trials_and_a_killed_trial_resumes_bit_identical(
+        local_ray, tmp_path, capsys):
     """PPO over Breakout 1 and Boxing 1 with action_head=factored, which only Boxing's 18
-    actions allow; Boxing's trial is killed after its first part."""
-    out = tmp_path_factory.mktemp("ppo-grid")
+    actions allow: Breakout's trial fails once, with the agent's message, before Ray starts;
+    Boxing's is killed after its first part, resumes from its Tune checkpoint, and ends with
+    the files `stori-jax train` + `eval` give alone."""
+    out = tmp_path / "grid"
     spec = grid.grid_spec("ppo", games=["Breakout", "Boxing"], presets=["1"], seeds=[0],
                           steps=STEPS, eval_episodes=1, max_episode_frames=400,
-                          overrides=TINY + ["action_head=factored"], parts=2)
+                          overrides=SMALL + ["action_head=factored"], parts=2)
     killer = KillOnce()
     outcome = grid.run_grid(spec, out, max_failures=2, progress_bar=False, callbacks=[killer])
-    return out, outcome, killer
 
-
-def test_a_bad_set_fails_only_its_own_trials_with_its_message(ppo_grid, capsys):
-    out, outcome, _ = ppo_grid
     assert list(outcome.finished) == ["Boxing 1 seed 0"]
     assert outcome.failed == {
         "Breakout 1 seed 0": "ValueError: action_head='factored' needs a game that plays ALE's "
                              "full 18 actions (e.g. Boxing, BankHeist); Breakout has 4: use "
                              "action_head='joint'"}
     assert not run_dir(out, "Breakout", "1", "ppo", 0).exists()  # never started
-    assert grid.report_outcome(outcome, grid.grid_spec("ppo", games=["Breakout", "Boxing"],
-                                                       presets=["1"], seeds=[0], steps=STEPS),
-                               out) == 1
+    assert grid.report_outcome(outcome, spec, out) == 1
     err = capsys.readouterr().err
-    assert err.count("action_head='factored' needs a game") == 1
+    assert err.count("action_head='factored' needs a game") == 2  # before Ray, and the summary
     assert json.loads((out / "table.json").read_text())["rows"][0]["PPO"]["seeds"] == [0]
 
-
-def test_a_killed_trial_resumes_from_its_checkpoint_bit_identical(ppo_grid, tmp_path):
-    out, outcome, killer = ppo_grid
     run = run_dir(out, "Boxing", "1", "ppo", 0)
     assert killer.killed == [(str(run), 32)] and killer.recovered == 1
-    # the same run by `stori-jax train` and `eval` alone
-    alone = tmp_path / "alone"
+    alone = tmp_path / "alone"  # the same run by `stori-jax train` and `eval` alone
     assert main(["train", "ppo", "--game", "Boxing", "--preset", "1", "--seed", "0",
-                 "--steps", str(STEPS), *[a for item in TINY + ["action_head=factored"]
+                 "--steps", str(STEPS), *[a for item in SMALL + ["action_head=factored"]
                                                 for a in ("--set", item)],
                  "--out", str(alone), "--quiet"]) == 0
     assert main(["eval", "--checkpoint", str(alone / "checkpoint.pkl"), "--episodes", "1",
@@ -234,26 +217,34 @@ def test_parts_are_whole_iterations_as_even_as_they_go():
     assert grid.progress(49, [25, 49, 74, 98]) == 2 / 5
 
 
-def test_a_run_folder_behind_its_tune_checkpoint_is_restored_from_it(ppo_grid, tmp_path):
-    """The archive replaces a folder that lost its files or holds a damaged checkpoint; a
-    folder as far as the archive (shared storage) is kept as it is."""
-    from baselines.agents import get_agent
+def test_a_run_folder_behind_its_tune_checkpoint_is_restored_from_it(tmp_path):
+    """The archive replaces a folder that lost its files, is behind it, or holds a damaged
+    checkpoint; a folder as far as the archive (shared storage) is kept as it is."""
+    from types import SimpleNamespace
 
-    agent = get_agent("ppo")
+    from baselines.runs import save_checkpoint
+
+    agent = SimpleNamespace(check_checkpoint=lambda payload, path: payload,
+                            training_progress=lambda p: dict(trained_agent_steps=p["steps"]))
     run = tmp_path / "run"
-    shutil.copytree(run_dir(ppo_grid[0], "Boxing", "1", "ppo", 0), run)
+    save_checkpoint(run / "checkpoint.pkl", dict(format="fake", steps=64))
+    (run / "log.csv").write_text("global_step\n32\n64\n")
     saved = tmp_path / "ckpt"
     saved.mkdir()
-    grid.archive_run(run, saved, agent_steps=STEPS, per_iteration=32)
+    grid.archive_run(run, saved, agent_steps=64, per_iteration=32)
     files = {p.name: p.read_bytes() for p in run.iterdir()}
     assert not grid.restore_run(run, saved, agent)  # as far: kept
     shutil.rmtree(run)  # the folder is lost: rebuilt from the archive
     assert grid.restore_run(run, saved, agent)
     assert {p.name: p.read_bytes() for p in run.iterdir()} == files
+    save_checkpoint(run / "checkpoint.pkl", dict(format="fake", steps=32))  # behind
+    assert grid.trained_iterations(run, agent, 32) == 1
+    assert grid.restore_run(run, saved, agent)
+    assert grid.trained_iterations(run, agent, 32) == 2
     (run / "checkpoint.pkl").write_bytes(b"junk")  # a damaged checkpoint is replaced too
     assert grid.trained_iterations(run, agent, 32) == -1
     assert grid.restore_run(run, saved, agent)
-    assert grid.trained_iterations(run, agent, 32) == 2
+    assert {p.name: p.read_bytes() for p in run.iterdir()} == files
 
 
 def test_the_cores_of_a_trial_cap_its_emulator_workers(monkeypatch):
@@ -282,3 +273,36 @@ def test_an_evaluation_already_there_is_reused_only_if_it_is_the_one_asked_for(t
     with pytest.raises(ValueError, match=r"holds another evaluation \(episodes 2 there, 5 "
                                          r"here\): move it away"):
         grid.reusable_result(path, dict(wanted, episodes=5), None)
+
+
+# -- the recorded evidence (baselines/run_grid_evidence.py) -----------------------------------
+
+RECORDED = sorted((Path(__file__).resolve().parents[1] / "baselines" / "results").glob("grid-*"))
+
+
+@pytest.mark.parametrize("folder", RECORDED, ids=lambda p: p.name)
+def test_a_recorded_grid_is_complete_its_own_table_and_the_serial_runs_twin(folder):
+    """Each recorded grid holds an evaluation of every run its grid.json lists (made with the
+    evidence script's settings), its table is what they give, and the timing file says every
+    run came out identical to the same run made serially."""
+    from baselines.run_grid_evidence import GRIDS
+    from baselines.table import aggregate, load_evaluations
+
+    timing = json.loads((folder / "timing.json").read_text())
+    assert set(timing) == set(GRIDS)
+    for name, record in timing.items():
+        out = folder / name
+        spec = json.loads((out / grid.SPEC_FILE).read_text())
+        settings = GRIDS[name]
+        assert (spec["agent"], spec["steps"], spec["eval_episodes"], spec["overrides"]) == (
+            settings["agent"], settings["steps"], settings["eval_episodes"],
+            list(settings["overrides"]))
+        evaluations = load_evaluations(out)
+        assert sorted((e["game"], e["preset"], e["train_seed"]) for e in evaluations) == sorted(
+            tuple(run) for run in spec["runs"])
+        assert json.loads((out / "table.json").read_text())["rows"] == json.loads(
+            json.dumps(aggregate(evaluations)))
+        runs = len(spec["runs"])
+        assert record["grid_equals_serial"] == dict(runs=runs, identical=runs, differ=[])
+        assert record["speedup"] == pytest.approx(record["serial"]["seconds"]
+                                                  / record["grid"]["seconds"])
