@@ -135,16 +135,21 @@ def _timed_loop(step, num_envs, num_actions, seconds, warmup=WARMUP):
     return float(np.median(rates))
 
 
-def envpool_raw(game, batch, workers, seconds):
+# a peer's observation, as stori-jax's obs kind it stands beside: (height, width, gray, stack)
+PEER_IMAGES = {"raw": (210, 160, False, 1), "atari84": (84, 84, True, 4)}
+
+
+def envpool_peer(game, batch, workers, seconds, obs="raw"):
     import envpool
 
     from stori_jax.games import get_game
 
     spec = get_game(game)
+    height, width, gray, stack = PEER_IMAGES[obs]
     task = "".join(p.capitalize() for p in spec.rom_id.split("_")) + "-v5"
     env = envpool.make(task, env_type="gymnasium", num_envs=batch, batch_size=batch,
-                       num_threads=workers, img_height=210, img_width=160, gray_scale=False,
-                       stack_num=1, frame_skip=FRAME_SKIP, noop_max=1, episodic_life=False,
+                       num_threads=workers, img_height=height, img_width=width, gray_scale=gray,
+                       stack_num=stack, frame_skip=FRAME_SKIP, noop_max=1, episodic_life=False,
                        reward_clip=False, repeat_action_probability=0.0)
     env.reset()
     rate = _timed_loop(lambda a: env.step(a), batch, spec.num_actions, seconds)
@@ -152,15 +157,16 @@ def envpool_raw(game, batch, workers, seconds):
     return rate
 
 
-def ale_vector(game, batch, workers, seconds):
+def ale_vector(game, batch, workers, seconds, obs="raw"):
     from ale_py.vector_env import AtariVectorEnv
 
     from stori_jax.games import get_game
 
     spec = get_game(game)
-    env = AtariVectorEnv(spec.rom_id, batch, num_threads=workers, img_height=210, img_width=160,
-                         grayscale=False, stack_num=1, frameskip=FRAME_SKIP, maxpool=True,
-                         noop_max=0, reward_clipping=False, use_fire_reset=False)
+    height, width, gray, stack = PEER_IMAGES[obs]
+    env = AtariVectorEnv(spec.rom_id, batch, num_threads=workers, img_height=height,
+                         img_width=width, grayscale=gray, stack_num=stack, frameskip=FRAME_SKIP,
+                         maxpool=True, noop_max=0, reward_clipping=False, use_fire_reset=False)
     env.reset(seed=0)
     rate = _timed_loop(lambda a: env.step(a), batch, spec.num_actions, seconds)
     env.close()
@@ -217,6 +223,11 @@ def envpool_supports(game, preset):
 
 # -- the run ----------------------------------------------------------------------------------
 
+PEER_KINDS = {"envpool": {"raw": "envpool raw", "atari84": "envpool 84x84 gray x4"},
+              "ale-py": {"raw": "ale-py AtariVectorEnv", "atari84": "ale-py AtariVectorEnv 84x84 gray x4"}}
+PEERS = {kind for by_obs in PEER_KINDS.values() for kind in by_obs.values()}
+
+
 def games_of(args) -> list[str]:
     """The games the run measures: --games, else Breakout for --quick, else all four."""
     import stori_jax
@@ -243,14 +254,24 @@ def plan_measurements(args):
             continue  # measured in the sweep below
         jobs.append(dict(kind="emulator limit", game=g, preset="-", B=args.batch, backend="-",
                          obs="raw", fn=lambda g=g: emulator_limit(g, args.batch, w, args.seconds)))
+        for obs in ("raw", "atari84"):  # native envpool beside this game's envpool-backend runs
+            if any(gg == g and envpool_supports(gg, p) for gg, p in presets):
+                jobs.append(dict(kind=PEER_KINDS["envpool"][obs], game=g, preset="-",
+                                 B=args.batch, backend="envpool", obs=obs,
+                                 fn=lambda g=g, obs=obs: envpool_peer(g, args.batch, w,
+                                                                      args.seconds, obs)))
     for b in args.sizes if sweep else ():
         jobs.append(dict(kind="emulator limit", game="Breakout", preset="-", B=b, backend="-",
                          obs="raw", fn=lambda b=b: emulator_limit("Breakout", b, w, args.seconds)))
-        jobs.append(dict(kind="envpool raw", game="Breakout", preset="-", B=b, backend="envpool",
-                         obs="raw", fn=lambda b=b: envpool_raw("Breakout", b, w, args.seconds)))
-        jobs.append(dict(kind="ale-py AtariVectorEnv", game="Breakout", preset="-", B=b,
-                         backend="ale-py", obs="raw",
-                         fn=lambda b=b: ale_vector("Breakout", b, w, args.seconds)))
+        for obs in ("raw", "atari84"):  # each peer with stori-jax's observation's twin
+            jobs.append(dict(kind=PEER_KINDS["envpool"][obs], game="Breakout", preset="-",
+                             B=b, backend="envpool", obs=obs,
+                             fn=lambda b=b, obs=obs: envpool_peer("Breakout", b, w, args.seconds,
+                                                                  obs)))
+            jobs.append(dict(kind=PEER_KINDS["ale-py"][obs], game="Breakout", preset="-", B=b,
+                             backend="ale-py", obs=obs,
+                             fn=lambda b=b, obs=obs: ale_vector("Breakout", b, w, args.seconds,
+                                                                obs)))
         for obs in ("raw", "atari84"):
             jobs.append(dict(kind="stori-jax", game="Breakout", preset="3.1", B=b,
                              backend="subproc", obs=obs,
@@ -324,6 +345,89 @@ def add_ratios(results):
     return results
 
 
+def add_best_peers(results):
+    """A "best peer" row per (game, B, obs) the peers were measured at (the faster of envpool
+    and ale-py's vector env), and each stori-jax run's ratio to it ("vs best peer") and, on the
+    envpool backend, to native envpool with the same observation ("vs native envpool")."""
+    best, native = {}, {}
+    for r in results:
+        if r["kind"] in PEERS and r["steps_per_s"] is not None:
+            key = (r["game"], r["B"], r["obs"])
+            if r["steps_per_s"] > best.get(key, (0, None))[0]:
+                best[key] = (r["steps_per_s"], r["kind"])
+            if r["backend"] == "envpool":
+                native[key] = r["steps_per_s"]
+    rows = []
+    for (game, b, obs), (rate, kind) in sorted(best.items()):
+        rows.append(dict(kind="best peer", game=game, preset="-", B=b, backend=kind, obs=obs,
+                         steps_per_s=rate))
+    for r in results:
+        if r["kind"] == "stori-jax" and r["steps_per_s"] is not None:
+            key = (r["game"], r["B"], r["obs"])
+            if key in best:
+                r["vs_best_peer"] = r["steps_per_s"] / best[key][0]
+            if r["backend"] == "envpool" and key in native:
+                r["vs_native_envpool"] = r["steps_per_s"] / native[key]
+    return results + rows
+
+
+def targets(results, batch: int) -> list[str]:
+    """The issue's throughput targets, each with its measured figure(s) and met / missed."""
+    def rows(**match):
+        return [r for r in results if all(r.get(k) == v for k, v in match.items())
+                and r.get("steps_per_s") is not None]
+
+    def verdict(values, bound):
+        return "met" if values and min(values) >= bound else "missed"
+
+    lines = []
+    for b in sorted({r["B"] for r in rows(kind="stori-jax", game="Breakout", preset="3.1",
+                                         backend="subproc")}):
+        peer = [r["vs_best_peer"] for r in rows(kind="stori-jax", game="Breakout", preset="3.1",
+                                                backend="subproc", obs="atari84", B=b)
+                if "vs_best_peer" in r]
+        raw = [r["vs_limit"] for r in rows(kind="stori-jax", game="Breakout", preset="3.1",
+                                           backend="subproc", obs="raw", B=b) if r.get("vs_limit")]
+        if peer:
+            lines.append(f"- B = {b}: Breakout 3.1 atari84 / best peer (84x84 gray x4) = "
+                         f"{peer[0]:.2f} (target >= 1.0: {verdict(peer, 1.0)})")
+        if raw:
+            lines.append(f"- B = {b}: Breakout 3.1 raw / emulator limit = {raw[0]:.2f} "
+                         f"(target >= 0.85: {verdict(raw, 0.85)})")
+    presets = rows(kind="stori-jax", backend="subproc", obs="atari84", B=batch)
+    own = [r for r in presets if r.get("vs_own_3.1") is not None and r["preset"] != "3.1"]
+    if own:
+        from stori_jax import preset as config_of
+
+        def renders(r):
+            return any(name == "observation" and part.kind == "ram"
+                       for name, part, _ in config_of(r["game"], r["preset"]).components())
+
+        plain = [r["vs_own_3.1"] for r in own if not renders(r)]
+        ram = [r["vs_own_3.1"] for r in own if renders(r)]
+        worst = min(own, key=lambda r: r["vs_own_3.1"])
+        lines.append(f"- B = {batch}: every preset's atari84 / its game's 3.1: min "
+                     f"{min(plain):.2f} (target >= 0.9: {verdict(plain, 0.9)}), RAM-obs presets "
+                     f"min {fmt(min(ram) if ram else None)} (target >= 0.7: "
+                     f"{verdict(ram, 0.7) if ram else 'none measured'}); lowest: "
+                     f"{worst['game']} {worst['preset']}")
+    naive = [r for r in rows(kind="stori-jax", backend="subproc", obs="raw", B=batch)
+             if r.get("vs_naive") is not None]
+    if naive:
+        worst = min(naive, key=lambda r: r["vs_naive"])
+        lines.append(f"- B = {batch}: every preset's raw / the naive reference way on the same "
+                     f"cores: min {worst['vs_naive']:.2f} ({worst['game']} {worst['preset']}; "
+                     f"target >= 1.0: {verdict([r['vs_naive'] for r in naive], 1.0)})")
+    envpool = [r for r in rows(kind="stori-jax", backend="envpool") if "vs_native_envpool" in r]
+    if envpool:
+        worst = min(envpool, key=lambda r: r["vs_native_envpool"])
+        lines.append(f"- backend='envpool' / native envpool, same observation: min "
+                     f"{worst['vs_native_envpool']:.2f} ({worst['game']} {worst['preset']} "
+                     f"{worst['obs']}; target >= 0.9: "
+                     f"{verdict([r['vs_native_envpool'] for r in envpool], 0.9)})")
+    return lines
+
+
 def fmt(x, spec=".2f"):
     return "-" if x is None else format(x, spec)
 
@@ -338,7 +442,8 @@ def markdown(results, meta) -> str:
              "measured in this run. envpool rows run granularity='step'. \"concept 2\": the "
              "share of a 2.2 preset's timed steps spent in concept 2.", "",
              "| kind | game | preset | backend | obs | B | steps/s | vs limit | vs own 3.1 | "
-             "vs naive | atari84/raw | concept 2 |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "vs naive | atari84/raw | concept 2 | vs best peer | vs native envpool |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     failed = []
     for r in results:
         run = f"{r['kind']} | {r['game']} | {r['preset']} | {r['backend']} | {r['obs']} | {r['B']}"
@@ -347,9 +452,13 @@ def markdown(results, meta) -> str:
         lines.append(
             f"| {run} | {'failed' if 'error' in r else fmt(r['steps_per_s'], '.0f')} | "
             f"{fmt(r.get('vs_limit'))} | {fmt(r.get('vs_own_3.1'))} | {fmt(r.get('vs_naive'))} | "
-            f"{fmt(r.get('atari84_vs_raw'))} | {fmt(r.get('concept2_share'))} |")
+            f"{fmt(r.get('atari84_vs_raw'))} | {fmt(r.get('concept2_share'))} | "
+            f"{fmt(r.get('vs_best_peer'))} | {fmt(r.get('vs_native_envpool'))} |")
     if failed:
         lines += ["", "Failed runs:", *failed]
+    goals = targets(results, meta["batch"])
+    if goals:
+        lines += ["", "Targets (ratios measured in this run):", *goals]
     return "\n".join(lines) + "\n"
 
 
@@ -446,7 +555,7 @@ def _check_arguments(parser, args):
     output_directory(parser, args.out)
 
 
-SWEEP_SIZES = {False: [8, 16, 32, 64], True: [8, 32]}  # B of the 3.1 sweep, by --quick
+SWEEP_SIZES = {False: [8, 32, 64], True: [8, 32]}  # B of the 3.1 sweep, by --quick
 
 
 def _shown(sizes) -> str:
@@ -499,10 +608,10 @@ def main(argv=None):
     from stori_jax.provenance import software
 
     meta = dict(date=datetime.date.today().isoformat(), host=socket.gethostname(),
-                cores=cores(), workers=args.workers,
+                cores=cores(), workers=args.workers, batch=args.batch,
                 seconds=args.seconds, argv=sys.argv[1:] if argv is None else list(argv),
                 software=software())
-    results = add_ratios(run(args, jobs))
+    results = add_best_peers(add_ratios(run(args, jobs)))
     args.out.mkdir(parents=True, exist_ok=True)
     stem = args.out / f"{meta['date']}-{meta['host']}{name_suffix(parser, args)}"
     Path(f"{stem}.json").write_text(json.dumps(dict(meta=meta, results=results), indent=1))

@@ -12,6 +12,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from stori_jax import functional as F
 from stori_jax.backends.layout import RESET_RENDER_BITS, STEP_RENDER_BITS
@@ -312,3 +313,40 @@ def push_frames(stack, frame, new_episode, final_frame=None, done=None):
         return new_stack, new_stack, None
     final = F.push_frame(stack, final_frame, jnp.zeros(new_episode.shape, bool))
     return new_stack, new_stack, jnp.where(done[:, None, None, None], final, new_stack)
+
+
+# -- a step finished chunk by chunk ---------------------------------------------------------------
+
+def frame_rows(frames, lo: int, hi: int, layout: str):
+    """Envs [lo, hi) of a backend's screens in ``layout`` (slot-major for ``pair``)."""
+    return frames[:, lo:hi] if layout == "pair" else frames[lo:hi]
+
+
+@functools.partial(jax.jit, static_argnames=("size",))
+def _take_rows(tree, lo, size: int):
+    return jax.tree.map(lambda x: jax.lax.dynamic_slice_in_dim(x, lo, size), tree)
+
+
+def rows_of(state: EnvState, draws: Draws, lo: int, size: int):
+    """(state, draws) of envs [lo, lo + size): every per-env array cut, the key kept (one
+    jitted call for the JAX arrays; host draws are cut in numpy)."""
+    per_env = state._replace(key=None)
+    jax_draws = {name: x for name, x in draws._asdict().items() if isinstance(x, jax.Array)}
+    cut_state, cut_draws = _take_rows((per_env, jax_draws), lo, size)
+    host = {name: x[lo:lo + size] for name, x in draws._asdict().items()
+            if x is not None and name not in jax_draws}
+    return cut_state._replace(key=state.key), draws._replace(**cut_draws, **host)
+
+
+@jax.jit
+def _join(trees):
+    return jax.tree.map(lambda *xs: jnp.concatenate(xs), *trees)
+
+
+def join_rows(parts):
+    """(state, result, pending) of the whole batch from its chunks' ``finish_step`` outputs, in
+    order (one jitted call)."""
+    states, results, pendings = zip(*parts)
+    per_env, result = _join([(s._replace(key=None), r) for s, r in zip(states, results)])
+    state = per_env._replace(key=states[0].key)
+    return state, tuple(result), np.concatenate(pendings)

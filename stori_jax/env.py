@@ -29,7 +29,8 @@ from stori_jax.backends.subproc import MAX_TIMEOUT_S
 from stori_jax.checks import MAX_SEED, check_actions, check_int, check_real, shown
 from stori_jax.config import Config
 from stori_jax.core import (FINAL_OUTPUTS, FRAME_OUTPUTS, STEP_OUTPUTS, Draws, EnvState,
-                            WorkerOutputs, before_step, ended, finish_step, initial_state)
+                            WorkerOutputs, before_step, ended, finish_step, frame_rows,
+                            initial_state, join_rows, rows_of)
 from stori_jax.errors import (ConcurrentUseError, EnvClosedError, EnvStateError,
                               InterruptedStepError, WorkersLateError)
 from stori_jax.functional.preprocess import ATARI84, DREAMER64, STACK
@@ -120,13 +121,14 @@ class Env:
         self._running = None  # the public call under way
         self._phase = Phase.NEEDS_RESET
         self._jit_plan = jit_key(plan)
+        self._part_plans = {}  # the plan of a chunk of the batch, by its size
         self._zero_draws = None
         # nothing random happens before the emulators run: skip the JAX call of send()
         self._deterministic_before_step = (
             plan.noise is None and plan.event is None and plan.mask is None
             and plan.drift_schedule is None and plan.noop_max == 0)
         self._state = initial_state(plan, seed)
-        self._in_flight = None  # (state, draws, resets) of the step sent, while IN_FLIGHT
+        self._in_flight = None  # (state, draws, resets, finished chunks) while IN_FLIGHT
         self._restart_due = False  # reset(seed=...) asked, and no reset has completed since
         self._reset_pending = np.zeros(plan.num_envs, bool)  # envs to reset on the next step
         # stepping through env.xla(): the current chain of handles and its steps so far
@@ -284,13 +286,14 @@ class Env:
                              f"{type(self.backend).__name__} cannot bound its wait")
         return time.monotonic() + timeout
 
-    def _wait(self, deadline: float | None, timeout, late: str):
-        """The backend's recv, bounded by ``deadline``; late workers: TimeoutError ending in
-        the caller's advice ``late``."""
+    def _wait(self, deadline: float | None, timeout, late: str, chunk: bool = False):
+        """The backend's recv (of the next chunk only, with ``chunk``), bounded by
+        ``deadline``; late workers: TimeoutError ending in the caller's advice ``late``."""
+        receive = self.backend.recv_chunk if chunk else self.backend.recv
         if deadline is None:
-            return self.backend.recv()
+            return receive()
         try:
-            return self.backend.recv(timeout=max(0.0, deadline - time.monotonic()))
+            return receive(timeout=max(0.0, deadline - time.monotonic()))
         except WorkersLateError as e:
             raise TimeoutError(f"{e} within {float(timeout):g} s; {late}") from None
 
@@ -311,7 +314,7 @@ class Env:
             self._write_inputs(draws, reset_first=self._reset_pending)
             with interrupts_deferred():  # the workers have the step, and this env knows it
                 self.backend.send_step()
-                self._in_flight = (state, draws, self._reset_pending.copy())
+                self._in_flight = (state, draws, self._reset_pending.copy(), [])
                 self._phase = Phase.IN_FLIGHT
 
     def recv(self, timeout: float | None = None):
@@ -328,11 +331,21 @@ class Env:
         """
         with self._call("recv"):
             deadline = self._deadline(timeout, "recv")
-            state, draws, was_reset = self._in_flight
+            state, draws, was_reset, parts = self._in_flight
+            late = "it is still in flight: call recv() again to keep waiting, or close() the env"
             try:
-                out = self._wait(deadline, timeout, "it is still in flight: call recv() again "
-                                                    "to keep waiting, or close() the env")
-                result, pending = self._finish(state, draws, out, was_reset)
+                # chunk by chunk: while the emulators run the next chunk, this chunk's JAX work
+                # (masks, pooling, preprocessing, stack) runs on XLA's threads
+                while True:
+                    given = len(self.backend.chunks) - self.backend.chunks_left
+                    if len(parts) < given:  # a chunk received, not yet finished
+                        lo, hi = self.backend.chunks[len(parts)]
+                        parts.append(self._finish_part(lo, hi, state, draws, was_reset))
+                    elif self.backend.chunks_left:
+                        self._wait(deadline, timeout, late, chunk=True)
+                    else:
+                        break
+                state, result, pending = self._assemble(parts)
             except BaseException:
                 # interrupted (Ctrl-C) or timed out while waiting for the workers: the step
                 # stays in flight and the next recv() resumes it.  Interrupted inside this
@@ -341,6 +354,7 @@ class Env:
                 if not self.backend.pending or self.backend.half_stepped:
                     self._in_flight, self._phase = None, Phase.NEEDS_RESET
                 raise
+            self._state = state
             self._reset_pending = pending  # before the step leaves the record (see above)
             self._in_flight = None
             self._phase = Phase.READY
@@ -543,15 +557,47 @@ class Env:
 
     def _finish(self, state, draws, out, reset_first):
         """((obs, reward, terminated, truncated, info), envs due for a reset) of the workers'
-        outputs ``out``; the env's state moves on."""
-        outputs = WorkerOutputs(**{name: out[name] for name in STEP_OUTPUTS})
-        if self.plan.autoreset and ended(outputs).any():  # the ended episodes' last observations
-            outputs = outputs._replace(**{name: out[name] for name in FINAL_OUTPUTS})
-        state, result, pending = finish_step(self._jit_plan, state, draws, outputs, reset_first)
+        outputs ``out`` for the whole batch; the env's state moves on."""
+        state, result, pending = finish_step(self._jit_plan, state, draws,
+                                             self._worker_outputs(out), reset_first)
         # the workers overwrite their buffers on the next send: finish reading them now
         jax.block_until_ready(result)
         self._state = state
         return result, pending
+
+    def _worker_outputs(self, out, lo: int = 0, hi: int | None = None) -> WorkerOutputs:
+        """The backend's outputs of envs [lo, hi) (numpy views), the final_* ones only where
+        an episode of them ended (the step compiled without them elsewhere)."""
+        if hi is None or (lo, hi) == (0, self.num_envs):
+            rows = {name: out[name] for name in STEP_OUTPUTS + FINAL_OUTPUTS if name in out}
+        else:
+            rows = {name: frame_rows(out[name], lo, hi, self.plan.frames_layout)
+                    if name in FRAME_OUTPUTS else out[name][lo:hi]
+                    for name in STEP_OUTPUTS + FINAL_OUTPUTS if name in out}
+        outputs = WorkerOutputs(**{name: rows[name] for name in STEP_OUTPUTS})
+        if self.plan.autoreset and ended(outputs).any():  # the ended episodes' last observations
+            outputs = outputs._replace(**{name: rows[name] for name in FINAL_OUTPUTS})
+        return outputs
+
+    def _finish_part(self, lo: int, hi: int, state, draws, reset_first):
+        """Dispatch the JAX end of the step for envs [lo, hi) (it runs on XLA's threads while
+        the emulators go on): (state, result, pending) of those envs."""
+        out = self._worker_outputs(self.backend.outputs(), lo, hi)
+        if (lo, hi) == (0, self.num_envs):
+            return finish_step(self._jit_plan, state, draws, out, reset_first)
+        plan = self._part_plans.get(hi - lo)
+        if plan is None:
+            plan = self._part_plans[hi - lo] = dataclasses.replace(self._jit_plan,
+                                                                     num_envs=hi - lo)
+        state, draws = rows_of(state, draws, lo, hi - lo)
+        return finish_step(plan, state, draws, out, reset_first[lo:hi])
+
+    def _assemble(self, parts):
+        """(state, result, pending) of the whole batch from its chunks' (in order), once every
+        output has been read (the workers overwrite their buffers on the next send)."""
+        whole = parts[0] if len(parts) == 1 else join_rows(parts)
+        jax.block_until_ready(whole[1])
+        return whole
 
     def __repr__(self):
         return (f"Env({self.plan.game}, {self.config.describe()}, num_envs={self.num_envs}, "

@@ -47,6 +47,43 @@ def split_batch(num_envs: int, num_workers: int) -> list[tuple[int, int]]:
     return bounds
 
 
+def chunk_bounds(num_envs: int, num_chunks: int) -> list[tuple[int, int]]:
+    """The [lo, hi) env ranges of the batch's chunks, as even as possible."""
+    return split_batch(num_envs, max(1, min(num_chunks, num_envs)))
+
+
+def assign_envs(num_envs: int, num_workers: int, inline_envs: int,
+                num_chunks: int) -> tuple[list[tuple[int, ...]], list[list[tuple[int, ...]]]]:
+    """Which process emulates which env: (the calling process's envs per chunk, each worker's
+    envs per chunk).  Each chunk is a contiguous range of the batch, shared out as the whole
+    batch is: its first envs to the calling process (``inline_envs`` in all, spread evenly over
+    the chunks), the rest split evenly between the workers.  With one chunk: envs
+    0..inline_envs-1 here, then each worker a contiguous range."""
+    chunks = chunk_bounds(num_envs, num_chunks)
+    inline_sizes = [hi - lo for lo, hi in split_batch(inline_envs, len(chunks))]
+    inline, workers = [], [[] for _ in range(num_workers)]
+    for (lo, hi), here in zip(chunks, inline_sizes):
+        here = min(here, hi - lo)
+        inline.append(tuple(range(lo, lo + here)))
+        for w, (a, b) in enumerate(split_batch(hi - lo - here, num_workers)):
+            workers[w].append(tuple(range(lo + here + a, lo + here + b)))
+    return inline, workers
+
+
+def describe_envs(envs) -> str:
+    """'3..5, 9..9' for the env indices (3, 4, 5, 9)."""
+    runs, out = sorted(envs), []
+    start = prev = None
+    for i in runs + [None]:
+        if i is not None and prev is not None and i == prev + 1:
+            prev = i
+            continue
+        if start is not None:
+            out.append(f"{start}..{prev}")
+        start = prev = i
+    return ", ".join(out)
+
+
 _MAIN_MODULE_HIDDEN = threading.RLock()  # one thread at a time hides and restores it
 
 
@@ -147,7 +184,8 @@ class SubprocBackend:
     def __init__(self, *, game: str, seeds: list[int], num_workers: int, frame_skip: int,
                  per_frame: bool, event_mode: int | None, event_prob: float,
                  ram_obs_mode: int | None, want_screens: bool, max_episode_frames: int,
-                 autoreset: bool = True, pool_screens: bool = False, inline_envs: int = 0):
+                 autoreset: bool = True, pool_screens: bool = False, inline_envs: int = 0,
+                 num_chunks: int = 1):
         num_envs = len(seeds)
         if num_workers and mp.current_process().daemon:  # Python forbids it: say what works
             raise RuntimeError(
@@ -168,8 +206,10 @@ class SubprocBackend:
         self.views = self.buffers.views()
         if num_workers and not 0 <= inline_envs < num_envs:
             raise ValueError(f"inline_envs must be in [0, num_envs - 1], got {inline_envs}")
-        self.ranges = [(lo + inline_envs, hi + inline_envs)
-                       for lo, hi in split_batch(num_envs - inline_envs, num_workers)]
+        inline_chunks, worker_chunks = assign_envs(num_envs, num_workers, inline_envs,
+                                                   num_chunks)
+        self.chunks = chunk_bounds(num_envs, num_chunks)  # one step: one round a chunk
+        self.worker_envs = [sorted(i for chunk in w for i in chunk) for w in worker_chunks]
         self.processes, self.conns = [], []
         self.owner_pid = os.getpid()
         self._scratch = []  # folders of restore files the workers are still to read
@@ -177,34 +217,37 @@ class SubprocBackend:
                                            self.owner_pid, self._scratch)
         _LIVE_BACKENDS.add(self)
 
-        def spec_for(lo, hi):
-            return WorkerSpec(game=game, env_lo=lo, env_hi=hi, seeds=tuple(seeds[lo:hi]),
+        def spec_for(chunks):
+            return WorkerSpec(game=game, chunks=tuple(chunks),
+                              seeds=tuple(seeds[i] for chunk in chunks for i in chunk),
                               frame_skip=frame_skip, per_frame=per_frame, event_mode=event_mode,
                               event_prob=event_prob, ram_obs_mode=ram_obs_mode,
                               want_screens=want_screens, max_episode_frames=max_episode_frames,
                               autoreset=autoreset, pool_screens=pool_screens)
 
-        # envs 0..inline_envs-1 are emulated in this process, while the workers run theirs
-        self._inline = []
+        # the calling process emulates its envs of each chunk while the workers run theirs
+        self._inline_chunks = [[] for _ in self.chunks]
         if inline_envs:
             from stori_jax.backends.worker import make_emulators
 
-            self._inline = make_emulators(spec_for(0, inline_envs), self.views)
-        self._inline_command, self._inline_next, self._inline_broken = None, 0, None
-        for lo, hi in self.ranges:
-            spec = spec_for(lo, hi)
+            self._inline_chunks = make_emulators(spec_for(inline_chunks), self.views)
+        self._inline = [e for chunk in self._inline_chunks for e in chunk]  # in batch order
+        self._inline_work, self._inline_next, self._inline_broken = None, 0, None
+        for chunks in worker_chunks:
             parent_conn, child_conn = ctx.Pipe(duplex=True)
             process = ctx.Process(target=worker_main, daemon=True,
-                                  args=(spec, self.buffers, child_conn, os.getpid()),
+                                  args=(spec_for(chunks), self.buffers, child_conn, os.getpid()),
                                   name=f"stori-jax-worker-{len(self.processes)}")
             with _main_module_not_reimported():
                 process.start()
             child_conn.close()
             self.processes.append(process)
             self.conns.append(parent_conn)
-        self._pending, self._what = False, "start"
+        self._rounds = 0  # replies each worker still owes for the command in flight
+        self._what = "start"
         self._waiting = None
         try:
+            self._rounds = 1
             self._wait_all("start")
         except BaseException:
             self.close()
@@ -217,7 +260,7 @@ class SubprocBackend:
     @property
     def pending(self) -> bool:
         """A command was sent and its replies are not all in (e.g. its wait was interrupted)."""
-        return self._pending
+        return self._rounds > 0
 
     @property
     def half_stepped(self) -> bool:
@@ -225,21 +268,32 @@ class SubprocBackend:
         still owe, only a reset continues (their replies are awaited by it)."""
         return self._inline_broken is not None
 
-    def _send_all(self, command: bytes) -> None:
-        self._send_each([command] * len(self.conns))
+    @property
+    def chunks_left(self) -> int:
+        """Chunks of the step in flight whose outputs :meth:`recv_chunk` has not yet given."""
+        return self._rounds if self._what == "a step" else 0
 
-    def _send_each(self, commands: list[bytes]) -> None:
+    def _send_all(self, *messages: bytes) -> None:
+        """Send every worker each of ``messages``: one round of replies each."""
+        self._send_each([list(messages)] * len(self.conns), rounds=len(messages))
+
+    def _send_each(self, messages: list[list[bytes]], rounds: int = 1) -> None:
+        """Send each worker its messages (the same number each: one round of replies each)."""
         if self.closed:
             raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
-        if self._pending:
+        if self._rounds:
             raise RuntimeError("a step is already in flight: call recv() before sending again")
         with interrupts_deferred():  # every worker gets the command, and the record says so
-            for w, (conn, command) in enumerate(zip(self.conns, commands, strict=True)):
-                try:
-                    conn.send_bytes(command)
-                except (OSError, ValueError):
-                    self._raise_dead(w, "while sending a command")
-            self._pending = True
+            for w, (conn, mine) in enumerate(zip(self.conns, messages, strict=True)):
+                for message in mine:
+                    try:
+                        conn.send_bytes(message)
+                    except (OSError, ValueError):
+                        self._raise_dead(w, "while sending a command")
+            self._rounds = rounds
+
+    def _envs_of(self, w: int) -> str:
+        return f"envs {describe_envs(self.worker_envs[w])}"
 
     def _raise_dead(self, w: int, when: str):
         if self.closed:  # close() from another thread stopped the workers this one waits for
@@ -248,12 +302,12 @@ class SubprocBackend:
                                  "stori_jax.make")
         p = self.processes[w]
         p.join(timeout=0.5)
-        lo, hi = self.ranges[w]
         self.close()
-        raise WorkerError(f"emulator worker {w} (envs {lo}..{hi - 1}, pid {p.pid}) died {when} "
+        raise WorkerError(f"emulator worker {w} ({self._envs_of(w)}, pid {p.pid}) died {when} "
                           f"with exit code {p.exitcode}; the environment is closed")
 
     def _wait_all(self, what: str, timeout: float | None = None) -> dict[int, bytes]:
+        """One round of replies: one from every worker."""
         # The workers still to reply live on self: if the wait is interrupted (Ctrl-C) or times
         # out, the command stays pending and the next recv() resumes it, instead of a later
         # command taking this one's replies (and the workers' half-written buffers) for its own.
@@ -276,10 +330,13 @@ class SubprocBackend:
                         self._take_reply(obj, waiting, sentinels, what)
         except BaseException:
             if self.closed:  # a worker died or failed (or close() from another thread)
-                self._waiting, self._pending = None, False
+                self._waiting, self._rounds = None, 0
             raise
-        self._waiting, self._pending = None, False
-        _remove_folders(self._scratch)
+        with interrupts_deferred():
+            self._waiting = None
+            self._rounds -= 1
+        if not self._rounds:
+            _remove_folders(self._scratch)
         return self._replies
 
     def _take_reply(self, obj, waiting: dict, sentinels: dict, what: str) -> None:
@@ -295,9 +352,8 @@ class SubprocBackend:
         except (EOFError, OSError):
             self._raise_dead(w, f"during {what}")
         if reply[:1] == b"E":
-            lo, hi = self.ranges[w]
             self.close()
-            raise WorkerError(f"emulator worker {w} (envs {lo}..{hi - 1}) failed "
+            raise WorkerError(f"emulator worker {w} ({self._envs_of(w)}) failed "
                               f"during {what}:\n{reply[1:].decode(errors='replace')}")
         self._replies[w] = reply[1:]
         del waiting[w]
@@ -310,42 +366,68 @@ class SubprocBackend:
         command = reset_command(seed)
         with interrupts_deferred():
             self._send_all(command)
-            self._inline_command, self._what = command, "a reset"
+            self._inline_work = [(self._inline, command)]
+            self._what = "a reset"
 
     def send_step(self) -> None:
+        """Step every emulator: one command a chunk to each worker, all sent now; the replies
+        come chunk by chunk (:meth:`recv_chunk`)."""
+        commands = [b"S%d" % c for c in range(len(self.chunks))]
         with interrupts_deferred():
-            self._send_all(b"S")
-            self._inline_command, self._what = b"S", "a step"
+            self._send_all(*commands)
+            self._inline_work = [(chunk, b"S") for chunk in self._inline_chunks]
+            self._what = "a step"
 
-    def recv(self, timeout: float | None = None) -> dict[str, np.ndarray]:
-        """Wait for the workers (at most ``timeout`` seconds, then :class:`WorkersLateError`
-        with the command still pending); the returned views stay valid until the next send."""
+    def recv_chunk(self, timeout: float | None = None) -> tuple[int, int]:
+        """Wait for the next chunk of the step in flight: emulate this process's envs of it,
+        then wait for the workers' (at most ``timeout`` seconds, then
+        :class:`WorkersLateError` with the chunk still pending).  Returns its env range
+        [lo, hi); its outputs are in ``views`` until the next send."""
         if self.closed:
             raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
-        if not self._pending:
+        if not self._rounds:
             raise RuntimeError("nothing in flight: call send_step() or send_reset() first")
-        if self._inline_command is not None and self._inline_broken is None:
+        index = len(self._inline_work) - self._rounds if self._inline_work else 0
+        if self._inline_work and self._inline_broken is None:
+            emulators, command = self._inline_work[index]
             # one emulator at a time, so that an interrupted recv() resumes where it stopped
-            while self._inline_next < len(self._inline):
-                emulator = self._inline[self._inline_next]
+            while self._inline_next < len(emulators):
+                emulator = emulators[self._inline_next]
                 try:
-                    if self._inline_command == b"S":
+                    if command == b"S":
                         emulator.step()
                     else:
-                        emulator.start_episode(reset_seed(self._inline_command))
+                        emulator.start_episode(reset_seed(command))
                 except BaseException:
                     # stopped inside an emulator's frame loop: its state is half a step
                     self._inline_broken = emulator.i
                     raise
                 self._inline_next += 1
-            self._inline_command, self._inline_next = None, 0
         self._wait_all(self._what, timeout)
-        if self._inline_broken is not None:
+        self._inline_next = 0  # this chunk's envs here are done (a resumed wait skips them)
+        if not self._rounds:
+            self._inline_work = None
+        if self._inline_broken is not None and not self._rounds:
             env, self._inline_broken = self._inline_broken, None
-            self._inline_command, self._inline_next = None, 0
             raise InterruptedStepError(
                 f"a step was interrupted while env {env} was being emulated in this process; "
                 "its emulator is half a step ahead: call reset() before stepping again")
+        return self.chunks[index] if self._what == "a step" else (0, len(self.views["reward"]))
+
+    def recv(self, timeout: float | None = None) -> dict[str, np.ndarray]:
+        """Wait for the whole command in flight (every chunk left); as :meth:`recv_chunk`,
+        the timeout bounding the whole wait.  The views stay valid until the next send."""
+        if self.closed:
+            raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
+        if not self._rounds:
+            raise RuntimeError("nothing in flight: call send_step() or send_reset() first")
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while self._rounds:
+            self.recv_chunk(None if deadline is None else max(0.0, deadline - time.monotonic()))
+        return self.outputs()
+
+    def outputs(self) -> dict[str, np.ndarray]:
+        """The outputs of the last command, as the env reads them."""
         if self.frames_layout == "pooled":  # contiguous (B, H, W, 3)
             return dict(self.views, **{name: self.views[name][0] for name in
                                        ("frames", "final_frames") if name in self.views})
@@ -355,17 +437,17 @@ class SubprocBackend:
         """Every emulator's state (picklable), in env order; nothing may be in flight."""
         self._send_all(b"P")
         self._what = "a snapshot"
-        states = [emulator.snapshot() for emulator in self._inline]
+        states = {emulator.i: emulator.snapshot() for emulator in self._inline}
         replies = self._wait_all("a snapshot")
         for w in range(len(self.conns)):
-            states.extend(pickle.loads(replies[w]))
-        return states
+            states.update(zip(self.worker_envs[w], pickle.loads(replies[w]), strict=True))
+        return [states[i] for i in range(len(states))]
 
     def restore_differences(self, states: list[dict]) -> list[str]:
         """How the emulators of ``states`` differ from this backend's in what a restore cannot
         change ('name A there, B here'): their number and the episode frame limit (an ALE
         setting, not part of the state; snapshots of versions before it was recorded skip it)."""
-        here = len(self._inline) + sum(hi - lo for lo, hi in self.ranges)
+        here = len(self._inline) + sum(len(envs) for envs in self.worker_envs)
         if len(states) != here:
             return [f"emulators {len(states)} there, {here} here"]
         limits = {s.get("max_episode_frames", self.max_episode_frames) for s in states}
@@ -382,15 +464,15 @@ class SubprocBackend:
         folder = tempfile.mkdtemp(prefix="stori-jax-restore-")
         self._scratch.append(folder)  # removed when the workers have read it (or at close)
         commands = []
-        for w, (lo, hi) in enumerate(self.ranges):
+        for w, envs in enumerate(self.worker_envs):
             path = os.path.join(folder, f"worker-{w}.pkl")
             with open(path, "wb") as file:
-                pickle.dump(states[lo:hi], file)
+                pickle.dump([states[i] for i in envs], file)
             commands.append(b"L" + os.fsencode(path))
-        self._send_each(commands)
+        self._send_each([[command] for command in commands])
         self._what = "a restore"
-        for emulator, snap in zip(self._inline, states):
-            emulator.restore(snap)
+        for emulator in self._inline:
+            emulator.restore(states[emulator.i])
         self._wait_all("a restore")
 
     def close(self) -> None:

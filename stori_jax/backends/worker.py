@@ -4,11 +4,14 @@ Deterministic: everything random arrives in the shared buffers (executed actions
 uniforms, RAM-obs render decisions, reset no-ops).  Imports numpy, ale-py and the game tables
 only (no JAX), so it starts fast.
 
-Protocol over a Pipe, one byte per command: b"S" step, b"R" reset all (b"R" + a seed in
-ASCII: first restart every emulator from that batch seed, as a new env of it), b"C" close, b"P"
-snapshot (the reply carries the pickled emulator states), b"L" + the path of a file of
-pickled states: restore (a file, so that every command stays small: see interrupts.py).
-Replies: b"K" done (+ a payload for b"P"), or b"E" + a traceback.
+Protocol over a Pipe, one command a message: b"S" + a chunk number in ASCII: step this
+worker's envs of that chunk of the batch (a step of the batch is one such command per chunk,
+sent together, replied to one by one, so that the parent can finish a chunk while the next
+is emulated), b"R" reset all (b"R" + a seed in ASCII: first restart every emulator from that
+batch seed, as a new env of it), b"C" close, b"P" snapshot (the reply carries the pickled
+emulator states), b"L" + the path of a file of pickled states: restore (a file, so that every
+command stays small: see interrupts.py).  Replies: b"K" done (+ a payload for b"P"), or b"E"
++ a traceback.
 """
 
 from __future__ import annotations
@@ -45,11 +48,12 @@ def reset_seed(command: bytes) -> int | None:
 
 @dataclass(frozen=True)
 class WorkerSpec:
-    """Everything a worker needs besides its buffers and pipe (picklable)."""
+    """Everything a worker needs besides its buffers and pipe (picklable).  ``chunks``: the
+    batch indices of this worker's envs in each chunk of the batch (a step command names the
+    chunk to step); ``seeds``: their ALE seeds, in the same order, flattened."""
 
     game: str
-    env_lo: int
-    env_hi: int
+    chunks: tuple[tuple[int, ...], ...]
     seeds: tuple[int, ...]
     frame_skip: int
     per_frame: bool
@@ -272,12 +276,14 @@ class Emulator:
             v["lives"][i] = ale.lives()
 
 
-def make_emulators(spec: WorkerSpec, views: dict) -> list[Emulator]:
+def make_emulators(spec: WorkerSpec, views: dict) -> list[list[Emulator]]:
+    """The emulators of ``spec``, a list per chunk."""
     from stori_jax.games import get_game
 
     game = get_game(spec.game)
-    return [Emulator(spec, game, seed, i, views)
-            for i, seed in zip(range(spec.env_lo, spec.env_hi), spec.seeds)]
+    seeds = iter(spec.seeds)
+    return [[Emulator(spec, game, next(seeds), i, views) for i in chunk]
+            for chunk in spec.chunks]
 
 
 def _exit_with_parent(parent_pid: int, interval: float = 0.5) -> None:
@@ -300,7 +306,8 @@ def worker_main(spec: WorkerSpec, buffers, conn, parent_pid: int) -> None:
         return
     _exit_with_parent(parent_pid)
     try:
-        emulators = make_emulators(spec, buffers.views())
+        chunks = make_emulators(spec, buffers.views())
+        emulators = [emulator for chunk in chunks for emulator in chunk]  # in batch order
         conn.send_bytes(b"K")
     except BaseException:
         conn.send_bytes(b"E" + traceback.format_exc().encode())
@@ -312,8 +319,8 @@ def worker_main(spec: WorkerSpec, buffers, conn, parent_pid: int) -> None:
             return
         try:
             reply = b"K"
-            if command == b"S":
-                for emulator in emulators:
+            if command[:1] == b"S":
+                for emulator in chunks[int(command[1:])]:
                     emulator.step()
             elif command[:1] == b"R":
                 for emulator in emulators:
