@@ -39,7 +39,7 @@ class FakeClock:
 
 
 def throughput_args(**overrides):
-    args = dict(quick=False, seconds=3.0, batch=32, sizes=[8, 16, 32, 64], games=None,
+    args = dict(quick=False, seconds=3.0, batch=32, sizes=[8, 32, 64], games=None,
                 presets=None, workers=2, skip_naive=False)
     return argparse.Namespace(**{**args, **overrides})
 
@@ -259,6 +259,34 @@ def test_ratios_compare_like_with_like(monkeypatch):
     assert by["-", "-", "raw", 8, "Boxing"]["vs_limit"] == 1.0
 
 
+def test_the_best_peer_is_the_faster_peer_at_each_b_and_observation(monkeypatch):
+    throughput = script(monkeypatch, "throughput")
+
+    def row(kind, rate, obs="atari84", backend="subproc", B=32, preset="-"):
+        return dict(kind=kind, game="Breakout", preset=preset, B=B, backend=backend, obs=obs,
+                    steps_per_s=rate)
+
+    results = throughput.add_best_peers([
+        row("envpool 84x84 gray x4", 4000.0, backend="envpool"),
+        row("ale-py AtariVectorEnv 84x84 gray x4", 5000.0, backend="ale-py"),
+        row("envpool raw", 3000.0, obs="raw", backend="envpool"),
+        row("stori-jax", 2500.0, preset="3.1"),
+        row("stori-jax", 2000.0, backend="envpool", preset="3.1"),
+        row("stori-jax", 1500.0, obs="raw", preset="3.1", B=64),  # no peer at B = 64
+    ])
+    best = {(r["obs"], r["B"]): r for r in results if r["kind"] == "best peer"}
+    assert set(best) == {("atari84", 32), ("raw", 32)}
+    assert (best["atari84", 32]["steps_per_s"], best["atari84", 32]["backend"]) == (
+        5000.0, "ale-py AtariVectorEnv 84x84 gray x4")
+    subproc, pool, lone = [r for r in results if r["kind"] == "stori-jax"]
+    assert subproc["vs_best_peer"] == pytest.approx(0.5) and "vs_native_envpool" not in subproc
+    assert pool["vs_native_envpool"] == pytest.approx(0.5)  # envpool's own, not the best peer
+    assert "vs_best_peer" not in lone
+    lines = throughput.targets(results, batch=32)
+    assert "- B = 32: Breakout 3.1 atari84 / best peer (84x84 gray x4) = 0.50 (target >= 1.0: " \
+           "missed)" in lines
+
+
 # -- throughput.py: what a run measures ---------------------------------------------------------
 
 def planned(throughput, **overrides):
@@ -273,15 +301,18 @@ def test_a_full_run_measures_every_preset_and_the_breakout_sweep(monkeypatch):
     keys = planned(throughput)
     from envpool_bridge import unsupported_reasons  # noqa: F401 - envpool_supports uses it
 
-    for b in (8, 16, 32, 64):
-        for kind, backend in (("emulator limit", "-"), ("envpool raw", "envpool"),
-                              ("ale-py AtariVectorEnv", "ale-py")):
-            assert (kind, "Breakout", "-", b, backend, "raw") in keys
-        for obs in ("raw", "atari84"):
+    for b in (8, 32, 64):
+        assert ("emulator limit", "Breakout", "-", b, "-", "raw") in keys
+        for obs in ("raw", "atari84"):  # each peer beside each of stori-jax's observations
+            for peer, backend in (("envpool", "envpool"), ("ale-py", "ale-py")):
+                assert (throughput.PEER_KINDS[peer][obs], "Breakout", "-", b, backend,
+                        obs) in keys
             assert ("stori-jax", "Breakout", "3.1", b, "subproc", obs) in keys
     for game in ("Boxing", "Gopher", "BankHeist"):
         assert ("emulator limit", game, "-", 32, "-", "raw") in keys
-        assert not any(k[0] != "emulator limit" and k[2] == "-" and k[1] == game for k in keys)
+        # native envpool beside the game's envpool-backend runs, at the presets' B
+        assert {k[0] for k in keys if k[0] != "emulator limit" and k[2] == "-" and
+                k[1] == game} == set(throughput.PEER_KINDS["envpool"].values())
     for game, preset in stori_jax.list_presets():
         assert ("naive gymnasium", game, preset, 32, "gymnasium-async", "raw") in keys
         for obs in ("raw", "atari84"):
@@ -291,7 +322,7 @@ def test_a_full_run_measures_every_preset_and_the_breakout_sweep(monkeypatch):
     assert throughput.envpool_supports("Gopher", "2.2")
     assert not throughput.envpool_supports("Boxing", "2.2")  # RAM-obs
     assert not throughput.envpool_supports("Breakout", "2.1")  # events write the RAM
-    assert len(keys) == 4 * 5 + 3 + 24 * 3 - 2 + sum(
+    assert len(keys) == 3 * 7 + 3 * 3 + 24 * 3 - 2 + sum(
         2 * throughput.envpool_supports(g, p) for g, p in stori_jax.list_presets())
 
 
@@ -300,12 +331,14 @@ def test_a_subset_measures_only_what_it_names(monkeypatch):
     keys = planned(throughput, games=["Boxing"], presets=["3.1", "2.2"], sizes=[8],
                    skip_naive=True)
     assert {k[:3] for k in keys} == {("emulator limit", "Boxing", "-"),
+                                     ("envpool raw", "Boxing", "-"),
+                                     ("envpool 84x84 gray x4", "Boxing", "-"),
                                      ("stori-jax", "Boxing", "3.1"), ("stori-jax", "Boxing", "2.2")}
     assert {k[3] for k in keys} == {32}  # --sizes is Breakout 3.1's sweep only
     quick = planned(throughput, quick=True, sizes=[8, 32], presets=["2.2"])
     assert {k[1] for k in quick} == {"Breakout"}
     assert ("emulator limit", "Breakout", "-", 32, "-", "raw") in quick  # no sweep without 3.1
-    assert not any(k[0] in ("envpool raw", "ale-py AtariVectorEnv") for k in quick)
+    assert not any(k[0] in throughput.PEERS for k in quick if k[2] == "-" and k[1] != "Breakout")
     sweep = planned(throughput, quick=True, sizes=[8, 16], presets=["3.1"])
     assert {k[3] for k in sweep if k[0] == "emulator limit"} == {8, 16, 32}
     assert ("stori-jax", "Breakout", "3.1", 32, "subproc", "raw") in sweep  # B not in the sweep
@@ -348,23 +381,24 @@ def test_a_failed_run_shows_as_failed_and_its_error_below_the_table(monkeypatch)
     rows = fake_results()
     rows[-1] = dict(rows[-1], steps_per_s=None, error="ValueError: no emulator")
     text = throughput.markdown(throughput.add_ratios(rows), dict(date="d", host="h", cores=2,
-                                                                 workers=2))
+                                                                 workers=2, batch=32))
     assert table(text)[-1]["steps/s"] == "failed"
-    assert text.rstrip().endswith("Failed runs:\n- stori-jax Breakout 2.2 subproc atari84 32: "
-                                  "ValueError: no emulator")
+    assert "\n\nFailed runs:\n- stori-jax Breakout 2.2 subproc atari84 32: ValueError: no " \
+           "emulator\n\n" in text
 
 
 def test_the_table_columns_hold_what_their_headers_say(monkeypatch):
     throughput = script(monkeypatch, "throughput")
     results = throughput.add_ratios(fake_results())
-    meta = dict(date="2026-11-24", host="h", cores=2, workers=2)
+    meta = dict(date="2026-11-24", host="h", cores=2, workers=2, batch=32)
     rows = table(throughput.markdown(results, meta))
     assert len(rows) == len(results)
     row = rows[-1]
     assert row == {"kind": "stori-jax", "game": "Breakout", "preset": "2.2",
                    "backend": "subproc", "obs": "atari84", "B": "32", "steps/s": "1500",
                    "vs limit": "0.30", "vs own 3.1": "-", "vs naive": "1.50",
-                   "atari84/raw": "0.75", "concept 2": "0.75"}
+                   "atari84/raw": "0.75", "concept 2": "0.75", "vs best peer": "-",
+                   "vs native envpool": "-"}
     assert rows[-2]["vs own 3.1"] == "0.80" and rows[-2]["concept 2"] == "0.25"
 
 
@@ -392,7 +426,7 @@ def test_a_run_writes_json_a_table_and_the_plots_it_names(monkeypatch, tmp_path,
 
 @pytest.mark.parametrize("argv, suffix", [
     ([], ""),
-    (["--sizes", "8", "16", "32", "64"], ""),  # the defaults, spelt out
+    (["--sizes", "8", "32", "64"], ""),  # the defaults, spelt out
     (["--quick"], "-quick"),
     (["--quick", "--sizes", "8", "32"], "-quick"),
     (["--games", "boxing", "--presets", "3.1", "2.2"], "-Boxing-3.1-2.2"),
@@ -431,10 +465,11 @@ def test_a_run_measures_and_records_with_the_workers_and_seconds_asked(monkeypat
     asked = []
 
     def peer(rate):
-        return lambda game, batch, workers, seconds: asked.append((workers, seconds)) or rate
+        return lambda game, batch, workers, seconds, obs="raw": (
+            asked.append((workers, seconds)) or rate)
 
     monkeypatch.setattr(throughput, "emulator_limit", peer(1000.0))
-    monkeypatch.setattr(throughput, "envpool_raw", peer(900.0))
+    monkeypatch.setattr(throughput, "envpool_peer", peer(900.0))
     monkeypatch.setattr(throughput, "ale_vector", peer(800.0))
     monkeypatch.setattr(throughput, "stori", lambda game, preset, batch, seconds, obs, backend: (
         asked.append((7, seconds)), (500.0, None))[1])
@@ -445,7 +480,8 @@ def test_a_run_measures_and_records_with_the_workers_and_seconds_asked(monkeypat
     data = json.loads(json_file.read_text())
     assert data["meta"]["workers"] == 7 and data["meta"]["seconds"] == 0.5
     assert data["meta"]["cores"] == 2
-    assert len(data["results"]) == len(asked) and all(r["W"] == 7 for r in data["results"])
+    measured = [r for r in data["results"] if r["kind"] != "best peer"]
+    assert len(measured) == len(asked) and all(r["W"] == 7 for r in measured)
     assert all(r["steps_per_s"] is not None for r in data["results"])
     (md,) = tmp_path.glob("*.md")
     assert "W = 7 worker processes" in md.read_text()
@@ -936,7 +972,8 @@ def test_the_xla_loops_compile_before_timing(monkeypatch):
 
 def test_the_peers_run_raw_frames_at_the_same_batch_threads_and_frame_skip(monkeypatch):
     """Raw envpool and ale-py's AtariVectorEnv: B envs, W threads, frame skip 4, max-pooled
-    210x160 RGB, one frame a stack, no reward clipping, no episodic life, no sticky actions."""
+    210x160 RGB, one frame a stack (84x84 gray x4 beside atari84), no reward clipping, no
+    episodic life, no sticky actions."""
     import ale_py.vector_env
     import envpool
 
@@ -956,7 +993,7 @@ def test_the_peers_run_raw_frames_at_the_same_batch_threads_and_frame_skip(monke
     monkeypatch.setattr(envpool, "make", FakePool)
     monkeypatch.setattr(ale_py.vector_env, "AtariVectorEnv", FakePool)
     monkeypatch.setattr(throughput, "_timed_loop", lambda step, b, n, seconds: 123.0)
-    assert throughput.envpool_raw("Gopher", 6, 3, 1.0) == 123.0
+    assert throughput.envpool_peer("Gopher", 6, 3, 1.0) == 123.0
     assert throughput.ale_vector("Gopher", 6, 3, 1.0) == 123.0
     (pool_args, pool), (vector_args, vector) = made["args"]
     assert pool_args == ("Gopher-v5",) and {k: pool[k] for k in (
@@ -973,6 +1010,13 @@ def test_the_peers_run_raw_frames_at_the_same_batch_threads_and_frame_skip(monke
         grayscale=False, stack_num=1, reward_clipping=False)
     assert vector.get("repeat_action_probability", 0.0) == 0.0
     assert not vector.get("episodic_life", False)
+    throughput.envpool_peer("Gopher", 6, 3, 1.0, obs="atari84")
+    throughput.ale_vector("Gopher", 6, 3, 1.0, obs="atari84")
+    (_, pool84), (_, vector84) = made["args"][2:]
+    assert {k: pool84[k] for k in ("img_height", "img_width", "gray_scale", "stack_num")} == \
+        dict(img_height=84, img_width=84, gray_scale=True, stack_num=4)
+    assert {k: vector84[k] for k in ("img_height", "img_width", "grayscale", "stack_num")} == \
+        dict(img_height=84, img_width=84, grayscale=True, stack_num=4)
 
 
 def test_each_jax_stage_computes_what_its_name_says(monkeypatch):
