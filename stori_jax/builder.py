@@ -38,11 +38,12 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
         num_envs, seed: the batch size and the run's seed (in [0, 2^31 - 1]).
         backend: ``subproc`` (every mode) or ``envpool`` (see docs/semantics.md).
         num_workers, inline_envs: emulator processes, and envs emulated in this process while
-            they run; by default one worker per core but one, and this process takes a smaller
-            share, by what its JAX work costs (``num_workers=0``: every env here).
-        chunks: pieces the batch's step comes back in: the JAX work of one runs while the
-            emulators run the next (default 2 from 4 envs on, else 1).  The split and the
-            chunks change the speed only: a seed gives the same run with any.
+            they run; by default one worker per core but one, and this process an equal
+            share (``num_workers=0``: every env here).
+        chunks: pieces the batch's step comes back in (default 1): the JAX work of one runs
+            while the emulators run the next, which pays only where XLA has cores the
+            emulators do not use.  The split and the chunks change the speed only: a seed gives
+            the same run with any.
         obs: ``raw`` (210x160x3), ``atari84`` (84x84 gray, 4 stacked; the default), ``dreamer64``
             (64x64 RGB) or ``ram`` (the 128 RAM bytes; the only choice for type 0).
         frame_skip, granularity: emulator frames per agent step; perturbations per ``frame``
@@ -144,7 +145,7 @@ def resolve_obs(cfg: Config, obs: str | None) -> str:
 
 
 def worker_split(num_envs: int, num_workers: int | None, inline_envs: int | None, *,
-                 daemonic: bool, cores: int, obs: str = "raw") -> tuple[int, int]:
+                 daemonic: bool, cores: int) -> tuple[int, int]:
     """(worker processes, envs emulated in the calling process) of a batch, from the user's
     choices (None: the default) and the machine.  ``daemonic``: the caller may start no
     process (the default is then every env here)."""
@@ -169,7 +170,7 @@ def worker_split(num_envs: int, num_workers: int | None, inline_envs: int | None
                              "worker processes (each needs an env; num_workers=0 emulates all "
                              f"{num_envs} here), got {inline_envs}")
     if num_workers is None:
-        num_workers, default_inline = default_split(num_envs, cores, obs)
+        num_workers, default_inline = default_split(num_envs, cores)
         if inline_envs is None:
             inline_envs = default_inline
         else:  # the envs left to the workers bound how many there can be
@@ -183,26 +184,14 @@ def worker_split(num_envs: int, num_workers: int | None, inline_envs: int | None
     return num_workers, inline_envs
 
 
-# The calling process does, besides the envs it emulates, the JAX end of every step (masks,
-# pooling, preprocessing, stack) and the bookkeeping of the batch.  Measured on 2 cores
-# (benchmarks/README.md), as a fraction of emulating one env for one step: the JAX end of one
-# env's step by observation kind, and the rest of a step, in emulated envs.
-JAX_SHARE = {"ram": 0.02, "raw": 0.1, "atari84": 0.3, "dreamer64": 0.3}
-STEP_OVERHEAD_ENVS = 4
-
-
-def default_split(num_envs: int, cores: int, obs: str = "raw") -> tuple[int, int]:
+def default_split(num_envs: int, cores: int) -> tuple[int, int]:
     """(worker processes, envs emulated in this process) for a batch on ``cores`` cores: one
-    worker per core but one, and this process emulates fewer envs than a worker by what its
-    own work (the JAX end of the step, the bookkeeping) costs, so that every core is busy
-    about as long."""
+    worker per core but one, and this process an equal share (a smaller share, to leave this
+    process time for its JAX work, measured slower on 2 cores: benchmarks/README.md)."""
     if cores < 2 or num_envs < 2:
         return 1, 0
     workers = min(cores - 1, num_envs - 1)
-    # inline * e + B * share * e + overhead * e = (B - inline) * e / workers
-    share = JAX_SHARE.get(obs, 0.3)
-    inline = (num_envs * (1 - workers * share) - workers * STEP_OVERHEAD_ENVS) / (workers + 1)
-    return workers, max(0, min(num_envs - workers, int(round(inline))))
+    return workers, num_envs // (workers + 1)
 
 
 def build_subproc(plan: Plan, seed: int, max_episode_frames: int, *, num_workers,
@@ -212,7 +201,7 @@ def build_subproc(plan: Plan, seed: int, max_episode_frames: int, *, num_workers
 
     num_workers, inline_envs = worker_split(plan.num_envs, num_workers, inline_envs,
                                             daemonic=multiprocessing.current_process().daemon,
-                                            cores=available_cores(), obs=plan.obs)
+                                            cores=available_cores())
     wants_screens = plan.obs != "ram"
     pool_in_workers = wants_screens and not plan.needs_both_screens
     plan = dataclasses.replace(plan, frames_layout="pooled" if pool_in_workers else "pair")
@@ -229,10 +218,12 @@ def build_subproc(plan: Plan, seed: int, max_episode_frames: int, *, num_workers
 
 
 def chunk_count(num_envs: int, chunks: int | None) -> int:
-    """Chunks a step of the batch comes back in: ``chunks`` checked, or the default (2 from 4
-    envs on: the JAX work of one half runs while the emulators run the other)."""
+    """Chunks a step of the batch comes back in: ``chunks`` checked, or the default 1.  With 2,
+    the JAX work of one half runs while the emulators run the other: that needs a core the
+    emulators do not use, and on 2 cores it measured 0.75-0.9x of one chunk
+    (benchmarks/README.md), so it is opt-in."""
     if chunks is None:
-        return 2 if num_envs >= 4 else 1
+        return 1
     return check_int("chunks", chunks, 1, num_envs)
 
 

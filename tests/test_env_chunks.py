@@ -10,7 +10,6 @@ import pytest
 
 import stori_jax
 from stori_jax.backends.subproc import assign_envs
-from stori_jax.builder import default_split
 
 from _env_support import make, random_actions, run_env, to_numpy
 
@@ -25,13 +24,6 @@ def test_every_env_is_emulated_once_and_one_chunk_is_the_plain_split():
         assert sum(map(len, here)) == inline
     here, theirs = assign_envs(10, 2, 4, 1)  # one chunk: the envs here first, then contiguous
     assert here == [(0, 1, 2, 3)] and theirs == [[(4, 5, 6)], [(7, 8, 9)]]
-
-
-def test_this_process_emulates_less_where_its_jax_work_is_larger():
-    _, ram = default_split(32, 2, "ram")
-    _, raw = default_split(32, 2, "raw")
-    _, atari84 = default_split(32, 2, "atari84")
-    assert 16 >= ram >= raw > atari84 > 0
 
 
 CASES = {
