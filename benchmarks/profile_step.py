@@ -2,12 +2,12 @@
 time of it (XLA's threads included) and of its emulator workers, in ms per step of B envs.
 
     python benchmarks/profile_step.py                       # Breakout 3.1, B = 32, both obs
-    python benchmarks/profile_step.py --presets 3.1 1 --obs atari84 --batch 64
+    python benchmarks/profile_step.py --presets 3.1 1 --obs atari84 --batch 64 --chunks 1 2
 
-Each configuration is run twice: as stepping was before pipelining (the whole batch handed
-over at once, this process emulating half of it: ``--before``'s split) and as it is now (the
-batch handed over in chunks, the JAX work of one chunk running on XLA's threads while the
-emulators run the next, and this process emulating less).  Phases of the calling process:
+Each configuration is run with the default worker split once per ``--chunks`` value: the
+batch's step handed back whole (1, the default of ``stori_jax.make``) or in k chunks, the JAX
+work of one chunk running on XLA's threads while the emulators run the next.  Phases of the
+calling process:
 
 - send: actions checked, the step's draws (JAX, or numpy where nothing is random), inputs
   written, commands sent;
@@ -17,7 +17,7 @@ emulators run the next, and this process emulating less).  Phases of the calling
 - finish: waiting for XLA to finish and joining the chunks (the rest of recv);
 - agent: the loop's own work between steps (random actions here).
 
-Writes benchmarks/results/profile-<date>-<host>.{json,md}.
+Writes benchmarks/results/profile-<date>-<host>[-options].{json,md}.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from _checks import output_directory  # noqa: E402
+from _checks import options_in_name, output_directory  # noqa: E402
 
 PHASES = ("send", "emulate here", "wait", "dispatch", "finish", "agent")
 
@@ -47,20 +47,13 @@ def _cpu_ms(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) * 1000.0 / os.sysconf("SC_CLK_TCK")
 
 
-def profile(game: str, preset: str, obs: str, batch: int, steps: int, before: bool) -> dict:
+def profile(game: str, preset: str, obs: str, batch: int, steps: int, chunks: int) -> dict:
     """ms per step of each phase, and CPU ms per step of this process and of the workers."""
-    import inspect
-
     import jax
 
     import stori_jax
 
-    kwargs = {}
-    if before:  # one chunk, and the split of before: this process emulates an equal share
-        workers = max(1, min(len(os.sched_getaffinity(0)) - 1, batch - 1))
-        kwargs = dict(num_workers=workers, inline_envs=batch // (workers + 1))
-        if "chunks" in inspect.signature(stori_jax.make).parameters:
-            kwargs["chunks"] = 1
+    kwargs = dict(chunks=chunks)
     env = stori_jax.make(game, preset, num_envs=batch, seed=0, obs=obs, **kwargs)
     spent = dict.fromkeys(PHASES, 0.0)
 
@@ -111,7 +104,7 @@ def profile(game: str, preset: str, obs: str, batch: int, steps: int, before: bo
     in_recv = spent["emulate here"] + spent["wait"] + spent["dispatch"]
     spent["finish"] = recv_total[0] - in_recv
     per_step = {phase: 1000 * spent[phase] / steps for phase in PHASES}
-    return dict(game=game, preset=preset, obs=obs, B=batch, mode="before" if before else "now",
+    return dict(game=game, preset=preset, obs=obs, B=batch,
                 inline_envs=len(inline), workers=len(pids),
                 chunks=len(getattr(backend, "chunks", [None])),
                 steps_per_s=steps * batch / wall, wall_ms_per_step=1000 * wall / steps,
@@ -123,12 +116,12 @@ def markdown(rows, meta) -> str:
     lines = [f"# A step's time, {meta['date']} on {meta['host']} ({meta['cores']} cores)", "",
              "ms per agent step of B envs: the calling process's wall time by phase, then CPU "
              "time of the calling process (XLA's threads included) and of its workers.", "",
-             "| game | preset | obs | B | mode | split (workers + here) | chunks | steps/s | "
+             "| game | preset | obs | B | split (workers + here) | chunks | steps/s | "
              "wall ms | " + " | ".join(PHASES) + " | CPU here | CPU workers |",
-             "|" + "---|" * (11 + len(PHASES))]
+             "|" + "---|" * (10 + len(PHASES))]
     for r in rows:
         lines.append(
-            f"| {r['game']} | {r['preset']} | {r['obs']} | {r['B']} | {r['mode']} | "
+            f"| {r['game']} | {r['preset']} | {r['obs']} | {r['B']} | "
             f"{r['workers']} + {r['inline_envs']} | {r['chunks']} | {r['steps_per_s']:.0f} | "
             f"{r['wall_ms_per_step']:.2f} | "
             + " | ".join(f"{r['phases_ms'][p]:.2f}" for p in PHASES)
@@ -144,8 +137,8 @@ def main(argv=None):
     parser.add_argument("--obs", nargs="+", default=["raw", "atari84"])
     parser.add_argument("--batch", type=int, default=32)
     parser.add_argument("--steps", type=int, default=300, help="timed steps per run (default 300)")
-    parser.add_argument("--modes", nargs="+", choices=["before", "now"], default=["before", "now"],
-                        help="the split and chunks of before pipelining, and/or today's defaults")
+    parser.add_argument("--chunks", type=int, nargs="+", default=[1, 2],
+                        help="chunks a step comes back in, one run each (default 1 2)")
     parser.add_argument("--out", type=Path, default=HERE / "results")
     args = parser.parse_args(argv)
     output_directory(parser, args.out)
@@ -154,14 +147,14 @@ def main(argv=None):
     rows = []
     for preset in args.presets:
         for obs in args.obs:
-            for mode in args.modes:
-                rows.append(profile(args.game, preset, obs, args.batch, args.steps,
-                                    mode == "before"))
+            for chunks in args.chunks:
+                rows.append(profile(args.game, preset, obs, args.batch, args.steps, chunks))
     meta = dict(date=datetime.date.today().isoformat(), host=socket.gethostname(),
                 cores=len(os.sched_getaffinity(0)), load=os.getloadavg(), software=software(),
                 argv=sys.argv[1:] if argv is None else list(argv))
     args.out.mkdir(parents=True, exist_ok=True)
-    stem = args.out / f"profile-{meta['date']}-{meta['host']}"
+    stem = args.out / (f"profile-{meta['date']}-{meta['host']}" + options_in_name(
+        parser, args, dict(game="", presets="", obs="", batch="B", steps="steps", chunks="chunks")))
     Path(f"{stem}.json").write_text(json.dumps(dict(meta=meta, rows=rows), indent=1))
     table = markdown(rows, meta)
     Path(f"{stem}.md").write_text(table)
