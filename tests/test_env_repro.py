@@ -236,3 +236,18 @@ def test_each_draw_of_a_step_comes_from_its_own_purpose_stream(monkeypatch):
     jax.eval_shape(lambda state, actions: before_step.__wrapped__(plan, state, actions),
                    initial_state(plan, 0), jnp.zeros((2,), jnp.int32))
     assert sorted(used) == sorted(F.Purpose), used
+
+
+def test_the_purposes_streams_are_distinct_keys():
+    """Each purpose's key differs from every other's for every env (two purposes sharing a
+    stream would correlate, e.g., an action corruption with a mask decision)."""
+    import jax
+
+    from stori_jax import functional as F
+
+    keys = F.env_keys(jax.random.PRNGKey(0), 3)
+    data = {p: np.asarray(jax.random.key_data(F.purpose_keys(keys, p))) for p in F.Purpose}
+    for a in F.Purpose:
+        for b in F.Purpose:
+            if a < b:
+                assert not (data[a] == data[b]).all(axis=-1).any(), (a, b)
