@@ -431,3 +431,15 @@ def test_extract_labels_takes_a_game_name_or_its_spec():
         np.testing.assert_array_equal(by_name[name], by_spec[name])
     with pytest.raises(ValueError, match="NoSuchGame"):
         extract_labels("NoSuchGame", ram)
+
+
+def test_a_keys_mask_draws_are_pinned():
+    """A seed's masks are the same in every version: the decisions and torch centres of one
+    key, written down (the draws are statistically alike under any change of key use, e.g.
+    x and y taken from each other's stream, but a published run would no longer reproduce)."""
+    from stori_jax.functional import env_keys
+
+    apply, centres = draw_mask_decisions(env_keys(jax.random.PRNGKey(0), 2), prob=0.5,
+                                         per_frame=True, torch=True)
+    assert np.asarray(apply).tolist() == [[True, False], [False, True]]
+    assert np.asarray(centres).tolist() == [[[68, 132], [139, 120]], [[112, 92], [92, 160]]]
