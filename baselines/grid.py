@@ -620,6 +620,25 @@ def run_on_head(address: str, spec: GridSpec, out: Path, **settings) -> GridOutc
         ray.shutdown()
 
 
+def _signal_handlers() -> dict:
+    """The handlers Tune replaces (SIGINT, SIGUSR1): it restores them only when its own handler
+    fires, so after a finished grid Ctrl-C would only stop a Tune run that is over."""
+    import signal
+
+    names = [n for n in ("SIGINT", "SIGUSR1") if hasattr(signal, n)]
+    return {getattr(signal, n): signal.getsignal(getattr(signal, n)) for n in names}
+
+
+def _restore_signal_handlers(handlers: dict) -> None:
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():  # signal.signal's rule
+        for number, handler in handlers.items():
+            if handler is not None:
+                signal.signal(number, handler)
+
+
 def run_grid(spec: GridSpec, out: Path, *, address: str | None = None,
              cpus_per_run: float = 1, gpus_per_run: float = 0,
              max_failures: int = DEFAULT_MAX_FAILURES, progress_bar: bool = True,
@@ -669,6 +688,7 @@ def run_grid(spec: GridSpec, out: Path, *, address: str | None = None,
         print(f"grid: {name} cannot run: {error}", file=sys.stderr)
 
     started = time.perf_counter()
+    handlers = _signal_handlers()  # Tune replaces SIGINT's and leaves its own behind
     started_ray = connect(address)
     session = GridProgress(out, len(trials), progress_bar)
     _SESSION = session
@@ -703,6 +723,7 @@ def run_grid(spec: GridSpec, out: Path, *, address: str | None = None,
             import ray
 
             ray.shutdown()
+        _restore_signal_handlers(handlers)
     finished, failed = {}, dict(invalid)
     for result in results:
         trial = (result.config or {}).get("trial")  # None: a trial stopped before it started

@@ -76,7 +76,10 @@ def test_a_grid_ends_with_the_complete_table_and_running_it_again_runs_nothing(
     out = tmp_path / "grid"
     argv = ["grid", "--agent", "random", "--games", "Breakout", "--presets", "1", "3.1",
             "--seeds", "0", "7", *EVAL, "--out", str(out), "--quiet"]
+    handler = signal.getsignal(signal.SIGINT)
     assert main(argv) == 0
+    # Tune's SIGINT handler does not outlive the grid (Ctrl-C after it stopped nothing)
+    assert signal.getsignal(signal.SIGINT) is handler
     table = json.loads((out / "table.json").read_text())
     assert [(r["game"], r["preset"], r["Random"]["seeds"]) for r in table["rows"]] == [
         ("Breakout", "1", [0, 7]), ("Breakout", "3.1", [0, 7])]
