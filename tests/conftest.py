@@ -41,3 +41,24 @@ def pytest_configure(config):
     os.environ["JAX_COMPILATION_CACHE_DIR"] = str(cache)
     for name, value in CACHE_SETTINGS.items():
         os.environ.setdefault(name, value)
+
+
+@pytest.fixture(autouse=True)
+def python_handles_ctrl_c():
+    """Every test starts with Python's own SIGINT handler, unblocked: a library a test ran in the
+    same process (Ray's Tune and its helpers) may leave its own behind, and the Ctrl-C tests
+    (os.kill(os.getpid(), SIGINT)) then saw no KeyboardInterrupt, depending on test order."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    handler = signal.getsignal(signal.SIGINT)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        if handler is not None:
+            signal.signal(signal.SIGINT, handler)
