@@ -47,13 +47,14 @@ def _cpu_ms(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) * 1000.0 / os.sysconf("SC_CLK_TCK")
 
 
-def profile(game: str, preset: str, obs: str, batch: int, steps: int, chunks: int) -> dict:
+def profile(game: str, preset: str, obs: str, batch: int, steps: int, chunks: int,
+            frame_work: str = "workers") -> dict:
     """ms per step of each phase, and CPU ms per step of this process and of the workers."""
     import jax
 
     import stori_jax
 
-    kwargs = dict(chunks=chunks)
+    kwargs = dict(chunks=chunks, frame_work=frame_work)
     env = stori_jax.make(game, preset, num_envs=batch, seed=0, obs=obs, **kwargs)
     spent = dict.fromkeys(PHASES, 0.0)
 
@@ -104,8 +105,8 @@ def profile(game: str, preset: str, obs: str, batch: int, steps: int, chunks: in
     in_recv = spent["emulate here"] + spent["wait"] + spent["dispatch"]
     spent["finish"] = recv_total[0] - in_recv
     per_step = {phase: 1000 * spent[phase] / steps for phase in PHASES}
-    return dict(game=game, preset=preset, obs=obs, B=batch,
-                inline_envs=len(inline), workers=len(pids),
+    return dict(game=game, preset=preset, obs=obs, B=batch, frame_work=frame_work,
+                frames_layout=env.plan.frames_layout, inline_envs=len(inline), workers=len(pids),
                 chunks=len(getattr(backend, "chunks", [None])),
                 steps_per_s=steps * batch / wall, wall_ms_per_step=1000 * wall / steps,
                 phases_ms=per_step, cpu_ms_here=cpu_here / steps,
@@ -116,12 +117,13 @@ def markdown(rows, meta) -> str:
     lines = [f"# A step's time, {meta['date']} on {meta['host']} ({meta['cores']} cores)", "",
              "ms per agent step of B envs: the calling process's wall time by phase, then CPU "
              "time of the calling process (XLA's threads included) and of its workers.", "",
-             "| game | preset | obs | B | split (workers + here) | chunks | steps/s | "
-             "wall ms | " + " | ".join(PHASES) + " | CPU here | CPU workers |",
-             "|" + "---|" * (10 + len(PHASES))]
+             "| game | preset | obs | B | frame work (frames sent) | split (workers + here) | "
+             "chunks | steps/s | wall ms | " + " | ".join(PHASES) + " | CPU here | CPU workers |",
+             "|" + "---|" * (11 + len(PHASES))]
     for r in rows:
         lines.append(
             f"| {r['game']} | {r['preset']} | {r['obs']} | {r['B']} | "
+            f"{r.get('frame_work', 'caller')} ({r.get('frames_layout', 'pooled')}) | "
             f"{r['workers']} + {r['inline_envs']} | {r['chunks']} | {r['steps_per_s']:.0f} | "
             f"{r['wall_ms_per_step']:.2f} | "
             + " | ".join(f"{r['phases_ms'][p]:.2f}" for p in PHASES)
@@ -137,24 +139,34 @@ def main(argv=None):
     parser.add_argument("--obs", nargs="+", default=["raw", "atari84"])
     parser.add_argument("--batch", type=int, default=32)
     parser.add_argument("--steps", type=int, default=300, help="timed steps per run (default 300)")
-    parser.add_argument("--chunks", type=int, nargs="+", default=[1, 2],
-                        help="chunks a step comes back in, one run each (default 1 2)")
+    parser.add_argument("--chunks", type=int, nargs="+", default=[1],
+                        help="chunks a step comes back in, one run each (default 1)")
+    parser.add_argument("--frame-work", nargs="+", default=["workers", "caller"],
+                        choices=["workers", "caller"],
+                        help="where the frame work runs (make's frame_work), one run each "
+                             "(default both)")
+    parser.add_argument("--repeats", type=int, default=1,
+                        help="run every configuration this many times, interleaved (default 1)")
     parser.add_argument("--out", type=Path, default=HERE / "results")
     args = parser.parse_args(argv)
     output_directory(parser, args.out)
     from stori_jax.provenance import software
 
     rows = []
-    for preset in args.presets:
-        for obs in args.obs:
-            for chunks in args.chunks:
-                rows.append(profile(args.game, preset, obs, args.batch, args.steps, chunks))
+    for _ in range(args.repeats):
+        for preset in args.presets:
+            for obs in args.obs:
+                for chunks in args.chunks:
+                    for frame_work in args.frame_work:
+                        rows.append(profile(args.game, preset, obs, args.batch, args.steps,
+                                            chunks, frame_work))
     meta = dict(date=datetime.date.today().isoformat(), host=socket.gethostname(),
                 cores=len(os.sched_getaffinity(0)), load=os.getloadavg(), software=software(),
                 argv=sys.argv[1:] if argv is None else list(argv))
     args.out.mkdir(parents=True, exist_ok=True)
     stem = args.out / (f"profile-{meta['date']}-{meta['host']}" + options_in_name(
-        parser, args, dict(game="", presets="", obs="", batch="B", steps="steps", chunks="chunks")))
+        parser, args, dict(game="", presets="", obs="", batch="B", steps="steps", chunks="chunks",
+                           frame_work="", repeats="x")))
     Path(f"{stem}.json").write_text(json.dumps(dict(meta=meta, rows=rows), indent=1))
     table = markdown(rows, meta)
     Path(f"{stem}.md").write_text(table)

@@ -16,6 +16,7 @@ from stori_jax.checks import MAX_INT32, MAX_SEED, check_int
 from stori_jax.config import GRANULARITIES, Config
 from stori_jax.fork_guard import refuse_if_forked_after_jax
 from stori_jax.games import get_game
+from stori_jax.pixels import OBSERVATION_LAYOUTS
 from stori_jax.plan import OBS_KINDS, Plan, compile_plan
 from stori_jax.presets import preset as get_preset
 
@@ -28,7 +29,8 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
          num_envs: int, seed: int, backend: str = "subproc", num_workers: int | None = None,
          obs: str | None = None, frame_skip: int = FRAME_SKIP, granularity: str | None = None,
          max_episode_frames: int = MAX_EPISODE_FRAMES, noop_max: int = 0, autoreset: bool = True,
-         inline_envs: int | None = None, chunks: int | None = None):
+         inline_envs: int | None = None, chunks: int | None = None,
+         frame_work: str | None = None):
     """A batched STORI environment of ``num_envs`` emulators.
 
     Args:
@@ -52,6 +54,11 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
             frames after each reset (drawn from the seed).
         autoreset: an ended episode's env returns its next episode's first observation in the
             same step (``info["final_obs"]`` holds the last one); False: on the next step.
+        frame_work: where an unmasked screen becomes the observation (max-pool, luma, resize):
+            ``workers`` (each emulating process, for its own envs: only the observation
+            crosses between processes), ``caller`` (JAX in this process, on the whole batch),
+            or None: ``workers`` where JAX's default device is the CPU, else ``caller``.  The
+            bits are the same either way.
 
     Returns:
         an :class:`stori_jax.Env`.
@@ -76,9 +83,14 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
         check_memory(num_envs, frame_skip, buffers="envpool's frame buffers")
     plan = compile_plan(cfg, spec, num_envs=settings["num_envs"], frame_skip=frame_skip,
                         obs=obs, noop_max=settings["noop_max"], autoreset=settings["autoreset"])
-    build = build_envpool if backend == "envpool" else build_subproc
-    plan, emulators = build(plan, settings["seed"], settings["max_episode_frames"],
-                            num_workers=num_workers, inline_envs=inline_envs, chunks=chunks)
+    if backend == "envpool":
+        plan, emulators = build_envpool(plan, settings["seed"], settings["max_episode_frames"],
+                                        num_workers=num_workers, inline_envs=inline_envs,
+                                        chunks=chunks, frame_work=frame_work)
+    else:
+        plan, emulators = build_subproc(plan, settings["seed"], settings["max_episode_frames"],
+                                        num_workers=num_workers, inline_envs=inline_envs,
+                                        chunks=chunks, frame_work=resolve_frame_work(frame_work))
     return Env(plan, cfg, settings["seed"], emulators)
 
 
@@ -173,8 +185,8 @@ def worker_split(num_envs: int, num_workers: int | None, inline_envs: int | None
         num_workers, default_inline = default_split(num_envs, cores)
         if inline_envs is None:
             inline_envs = default_inline
-        else:  # the envs left to the workers bound how many there can be
-            num_workers = min(num_workers, num_envs - inline_envs)
+        else:  # the envs left to the workers bound how many there can be (one at least)
+            num_workers = min(max(num_workers, 1), num_envs - inline_envs)
     inline_envs = inline_envs or 0
     if num_workers > num_envs:
         raise ValueError(f"num_workers must be <= num_envs ({num_envs}), got {num_workers}")
@@ -185,17 +197,47 @@ def worker_split(num_envs: int, num_workers: int | None, inline_envs: int | None
 
 
 def default_split(num_envs: int, cores: int) -> tuple[int, int]:
-    """(worker processes, envs emulated in this process) for a batch on ``cores`` cores: one
-    worker per core but one, and this process an equal share (a smaller share, to leave this
+    """(worker processes, envs emulated in this process) for a batch on ``cores`` cores: a
+    single env here, else one worker per core but one, and this process an equal share (a smaller share, to leave this
     process time for its JAX work, measured slower on 2 cores: benchmarks/README.md)."""
-    if cores < 2 or num_envs < 2:
+    if num_envs < 2:  # one env: emulated here, as ale-py's own env is (no process to start)
+        return 0, num_envs
+    if cores < 2:
         return 1, 0
     workers = min(cores - 1, num_envs - 1)
     return workers, num_envs // (workers + 1)
 
 
+FRAME_WORK = ("workers", "caller")
+
+
+def resolve_frame_work(frame_work: str | None) -> str:
+    """``frame_work`` checked, or its default: the emulating processes where JAX computes on
+    the CPU (there the caller's cores are the emulators' cores), else the accelerator."""
+    if frame_work is None:
+        import jax
+
+        return "workers" if jax.default_backend() == "cpu" else "caller"
+    if frame_work not in FRAME_WORK:
+        raise ValueError(f"frame_work must be one of {list(FRAME_WORK)} or None (by JAX's "
+                         f"default device), got {frame_work!r}")
+    return frame_work
+
+
+def subproc_frames_layout(plan: Plan, frame_work: str) -> str:
+    """How the emulating processes hand over their screens (stori_jax.pixels): both screens
+    where a mask is drawn per frame, the observation itself where they make it (no pixel mask
+    to apply first), else the max-pooled screen."""
+    if plan.obs == "ram" or plan.needs_both_screens:
+        return "pair"
+    pixel_mask = plan.mask is not None and plan.mask.kind != "ram"
+    if frame_work == "workers" and plan.obs in OBSERVATION_LAYOUTS and not pixel_mask:
+        return plan.obs
+    return "pooled"
+
+
 def build_subproc(plan: Plan, seed: int, max_episode_frames: int, *, num_workers,
-                  inline_envs, chunks=None):
+                  inline_envs, chunks=None, frame_work: str = "workers"):
     """(plan with its frames layout, the subproc backend) of a checked plan."""
     from stori_jax.backends.subproc import SubprocBackend
 
@@ -203,8 +245,7 @@ def build_subproc(plan: Plan, seed: int, max_episode_frames: int, *, num_workers
                                             daemonic=multiprocessing.current_process().daemon,
                                             cores=available_cores())
     wants_screens = plan.obs != "ram"
-    pool_in_workers = wants_screens and not plan.needs_both_screens
-    plan = dataclasses.replace(plan, frames_layout="pooled" if pool_in_workers else "pair")
+    plan = dataclasses.replace(plan, frames_layout=subproc_frames_layout(plan, frame_work))
     event, mask = plan.event, plan.mask
     backend = SubprocBackend(
         game=plan.game, seeds=emulator_seeds(seed, plan.num_envs), num_workers=num_workers,
@@ -212,7 +253,7 @@ def build_subproc(plan: Plan, seed: int, max_episode_frames: int, *, num_workers
         event_mode=event.mode if event else None, event_prob=event.prob if event else 0.0,
         ram_obs_mode=mask.mode if mask is not None and mask.kind == "ram" else None,
         want_screens=wants_screens, max_episode_frames=max_episode_frames,
-        autoreset=plan.autoreset, pool_screens=pool_in_workers, inline_envs=inline_envs,
+        autoreset=plan.autoreset, frames_layout=plan.frames_layout, inline_envs=inline_envs,
         num_chunks=chunk_count(plan.num_envs, chunks))
     return plan, backend
 
@@ -228,11 +269,11 @@ def chunk_count(num_envs: int, chunks: int | None) -> int:
 
 
 def build_envpool(plan: Plan, seed: int, max_episode_frames: int, *, num_workers,
-                  inline_envs, chunks=None):
+                  inline_envs, chunks=None, frame_work=None):
     """(plan with envpool's frames layout, the envpool backend); a ValueError names what
     needs the subproc backend."""
     for name, value in (("num_workers", num_workers), ("inline_envs", inline_envs),
-                        ("chunks", chunks)):
+                        ("chunks", chunks), ("frame_work", frame_work)):
         if value is not None:
             raise ValueError(f"{name} applies to backend='subproc' only (envpool runs its "
                              f"own threads); leave it None, got {value!r}")

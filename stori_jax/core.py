@@ -17,8 +17,10 @@ import numpy as np
 from stori_jax import functional as F
 from stori_jax.backends.layout import RESET_RENDER_BITS, STEP_RENDER_BITS
 from stori_jax.checks import MAX_SEED, check_int, unless_traced
-from stori_jax.functional.preprocess import ATARI84, STACK
+from stori_jax.functional.preprocess import (ATARI84, STACK, pack_stack, push_packed,
+                                             unpack_stack)
 from stori_jax.games import get_game
+from stori_jax.pixels import OBSERVATION_LAYOUTS
 from stori_jax.plan import Plan
 
 
@@ -178,6 +180,10 @@ def observe(plan: Plan, game, draws: Draws, frames, ram, ram_rendered, single_fr
     decisions applied (gated by the concept, or, for the first frame of an episode, by whether
     the mask shows on resets), then preprocessed (atari84: one frame, not yet stacked)."""
     masked = jnp.zeros((plan.num_envs,), bool)
+    if plan.mask is not None and plan.mask.kind == "ram":
+        masked = ram_rendered != 0
+    if plan.frames_layout in OBSERVATION_LAYOUTS:  # made by the emulating processes (no mask)
+        return frames + jnp.uint8(0), masked
     if plan.mask is not None and plan.mask.kind != "ram" and plan.obs != "ram":
         m = plan.mask
         reset_on = not m.under_drift
@@ -202,8 +208,6 @@ def observe(plan: Plan, game, draws: Draws, frames, ram, ram_rendered, single_fr
             masked = masked | apply[:, 0]
         screen = (jnp.maximum(masked_slots[0], masked_slots[1]) if pair else masked_slots[0])
     else:
-        if plan.mask is not None and plan.mask.kind == "ram":
-            masked = ram_rendered != 0
         screen = F.pool_screens(frames, plan.frames_layout) if plan.obs != "ram" else None
 
     if plan.obs == "raw":
@@ -308,11 +312,12 @@ def push_frames(stack, frame, new_episode, final_frame=None, done=None):
     intact.  The final observation (None without ``final_frame``, the newest frame of
     :func:`final_observations`): where ``done``, ``final_frame`` pushed onto the stack the
     episode ended with, elsewhere a third copy of the observation."""
-    new_stack = F.push_frame(stack, frame, new_episode)
+    packed = pack_stack(stack)
+    new_stack = push_packed(packed, frame, new_episode)
     if final_frame is None:
-        return new_stack, new_stack, None
-    final = F.push_frame(stack, final_frame, jnp.zeros(new_episode.shape, bool))
-    return new_stack, new_stack, jnp.where(done[:, None, None, None], final, new_stack)
+        return unpack_stack(new_stack), unpack_stack(new_stack), None
+    final = jnp.where(done[:, None, None], push_packed(packed, final_frame), new_stack)
+    return unpack_stack(new_stack), unpack_stack(new_stack), unpack_stack(final)
 
 
 # -- a step finished chunk by chunk ---------------------------------------------------------------

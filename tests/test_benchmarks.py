@@ -1117,24 +1117,25 @@ def test_the_other_scripts_name_a_run_with_other_options_apart(monkeypatch, tmp_
                                    else data["software"])
 
 
-@pytest.mark.parametrize("argv, suffix", [([], ""), (["--batch", "64", "--chunks", "2"],
-                                                     "-B64-chunks2")])
-def test_a_step_profile_has_a_row_per_chunk_count_and_its_options_in_the_name(
+@pytest.mark.parametrize("argv, suffix", [([], ""), (["--batch", "64", "--frame-work", "caller"],
+                                                     "-B64-caller")])
+def test_a_step_profile_has_a_row_per_frame_work_placement_and_its_options_in_the_name(
         monkeypatch, tmp_path, argv, suffix):
     profile_step = script(monkeypatch, "profile_step")
     asked = []
 
-    def fake(game, preset, obs, batch, steps, chunks):
-        asked.append((obs, batch, chunks))
+    def fake(game, preset, obs, batch, steps, chunks, frame_work):
+        asked.append((obs, batch, frame_work))
         return dict(game=game, preset=preset, obs=obs, B=batch, inline_envs=8, workers=1,
-                    chunks=chunks, steps_per_s=1000.0, wall_ms_per_step=32.0,
+                    chunks=chunks, frame_work=frame_work, frames_layout="pooled",
+                    steps_per_s=1000.0, wall_ms_per_step=32.0,
                     phases_ms=dict.fromkeys(profile_step.PHASES, 1.0), cpu_ms_here=20.0,
                     cpu_ms_workers=10.0)
 
     monkeypatch.setattr(profile_step, "profile", fake)
     profile_step.main(argv + ["--out", str(tmp_path)])
-    batch, chunks = (64, [2]) if argv else (32, [1, 2])
-    assert asked == [(obs, batch, c) for obs in ("raw", "atari84") for c in chunks]
+    batch, placements = (64, ["caller"]) if argv else (32, ["workers", "caller"])
+    assert asked == [(obs, batch, w) for obs in ("raw", "atari84") for w in placements]
     (md,) = tmp_path.glob("*.md")
     assert md.name == f"profile-{datetime.date.today().isoformat()}-" \
                       f"{json.loads(md.with_suffix('.json').read_text())['meta']['host']}" \

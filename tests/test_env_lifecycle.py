@@ -576,6 +576,10 @@ def test_step_before_reset_and_send_recv_misuse():
      r"num_workers applies to backend='subproc' only"),
     (dict(game="Breakout", backend="envpool", inline_envs=0),
      r"inline_envs applies to backend='subproc' only"),
+    (dict(game="Breakout", frame_work="gpu"),
+     r"frame_work must be one of \['workers', 'caller'\] or None .*, got 'gpu'"),
+    (dict(game="Breakout", backend="envpool", frame_work="workers"),
+     r"frame_work applies to backend='subproc' only"),
 ])
 def test_bad_make_arguments(kwargs, pattern):
     kwargs = dict(kwargs)

@@ -220,3 +220,21 @@ def test_pool_screens_of_each_frames_layout():
     np.testing.assert_array_equal(pool_screens(jnp.asarray(chw), "pooled_chw"), pooled)
     with pytest.raises(ValueError, match="frames layout must be one of"):
         pool_screens(jnp.asarray(pooled), "planar")
+
+
+@pytest.mark.parametrize("name", ["atari84", "dreamer64"])
+def test_the_emulating_processes_frame_work_is_bit_identical_to_jax(name):
+    """stori_jax.pixels (numpy, run where the frames are made) against the jitted functions
+    the caller runs: real screens, random ones, and the extremes (all 0, all 255)."""
+    from stori_jax import pixels
+
+    real = real_screens()
+    pairs = np.concatenate([np.stack([real, real[::-1]], 1), random_frames(5, b=3),
+                            np.zeros((1, 2, H, W, 3), np.uint8),
+                            np.full((1, 2, H, W, 3), 255, np.uint8)])
+    expected = np.asarray({"atari84": ATARI84, "dreamer64": DREAMER64}[name](
+        jnp.maximum(pairs[:, 0], pairs[:, 1])))
+    out = np.zeros((len(pairs),) + pixels.OBSERVATION_SHAPES[name], np.uint8)
+    for pair, row in zip(pairs, out):
+        pixels.OBSERVE[name](pair, row)
+    np.testing.assert_array_equal(out, expected)

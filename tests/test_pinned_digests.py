@@ -76,3 +76,17 @@ if __name__ == "__main__" and sys.argv[1:] == ["--record"]:
     digests = {f"{g} {p}": run_digest(g, p) for g, p in preset_names()}
     digests.update({f"{g} {p} {o}": run_digest(g, p, obs=o) for g, p, o in VARIANTS})
     FIXTURE.write_text(json.dumps(digests, indent=1) + "\n")
+
+
+@pytest.mark.parametrize("obs", ["atari84", "dreamer64"])
+def test_the_frame_work_gives_the_same_bits_in_the_workers_and_in_the_caller(obs):
+    """make(frame_work=...): the observation made by the emulating processes (numpy) or by
+    JAX in the calling process (the accelerator's placement) is the same, bit for bit."""
+    layouts = {}
+    for frame_work in ("workers", "caller"):
+        with stori_jax.make("Breakout", "3.1", num_envs=1, seed=0, obs=obs,
+                            frame_work=frame_work) as env:
+            layouts[frame_work] = env.plan.frames_layout
+    assert layouts == {"workers": obs, "caller": "pooled"}
+    key = "Breakout 3.1" + ("" if obs == "atari84" else f" {obs}")
+    assert run_digest("Breakout", "3.1", obs=obs, frame_work="caller") == recorded()[key]

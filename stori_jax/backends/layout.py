@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from stori_jax.pixels import OBSERVATION_SHAPES
+
 SCREEN = (210, 160, 3)
 RAM_SIZE = 128
 
@@ -20,13 +22,18 @@ RESET_RENDER_BITS = (4, 8)
 
 
 def buffer_specs(num_envs: int, frame_skip: int, screens: bool = True,
-                 final: bool = False) -> dict[str, tuple[tuple[int, ...], type]]:
+                 final: bool = False, frames_layout: str = "pair"
+                 ) -> dict[str, tuple[tuple[int, ...], type]]:
     """Name -> (shape, dtype) of every buffer; without ``screens`` (a RAM observation) the
     frame buffers hold no pixels.  ``final`` (an autoresetting batch): also the buffers of an
     ended episode's last observation, written where a step's episode ended (the others hold
-    the next episode's first)."""
+    the next episode's first).  ``frames_layout`` (stori_jax.pixels): an observation made by
+    the emulating processes travels instead of the two screens."""
     b = num_envs
-    frames = ((2, b) + (SCREEN if screens else (0, 0, SCREEN[2])), np.uint8)
+    if frames_layout in OBSERVATION_SHAPES and screens:
+        frames = ((b,) + OBSERVATION_SHAPES[frames_layout], np.uint8)
+    else:
+        frames = ((2, b) + (SCREEN if screens else (0, 0, SCREEN[2])), np.uint8)
     specs = {
         # parent -> workers
         "executed": ((b, frame_skip), np.int32),      # minimal-set action index per frame
@@ -59,10 +66,11 @@ def buffer_specs(num_envs: int, frame_skip: int, screens: bool = True,
 
 
 def shared_bytes(num_envs: int, frame_skip: int, screens: bool = True,
-                 final: bool = False) -> int:
+                 final: bool = False, frames_layout: str = "pair") -> int:
     """The bytes :func:`buffer_specs` asks for (computed, nothing allocated)."""
+    specs = buffer_specs(num_envs, frame_skip, screens, final, frames_layout)
     return sum(int(np.prod(shape, dtype=object)) * np.dtype(dtype).itemsize
-               for shape, dtype in buffer_specs(num_envs, frame_skip, screens, final).values())
+               for shape, dtype in specs.values())
 
 
 @dataclass
@@ -73,9 +81,10 @@ class SharedBuffers:
 
     @classmethod
     def allocate(cls, ctx, num_envs: int, frame_skip: int, screens: bool = True,
-                 final: bool = False) -> "SharedBuffers":
+                 final: bool = False, frames_layout: str = "pair") -> "SharedBuffers":
         raw = {}
-        for name, (shape, dtype) in buffer_specs(num_envs, frame_skip, screens, final).items():
+        specs = buffer_specs(num_envs, frame_skip, screens, final, frames_layout)
+        for name, (shape, dtype) in specs.items():
             nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
             raw[name] = (ctx.RawArray(ctypes.c_uint8, nbytes), shape, np.dtype(dtype).str)
         return cls(raw)

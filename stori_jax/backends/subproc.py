@@ -179,12 +179,12 @@ class SubprocBackend:
     can_time_out = True  # recv(timeout) bounds the wait for the workers
     can_snapshot = True
 
-    frames_layout = "pair"  # or "pooled" (set in __init__)
+    frames_layout = "pair"  # or "pooled", "atari84", "dreamer64" (set in __init__)
 
     def __init__(self, *, game: str, seeds: list[int], num_workers: int, frame_skip: int,
                  per_frame: bool, event_mode: int | None, event_prob: float,
                  ram_obs_mode: int | None, want_screens: bool, max_episode_frames: int,
-                 autoreset: bool = True, pool_screens: bool = False, inline_envs: int = 0,
+                 autoreset: bool = True, frames_layout: str = "pair", inline_envs: int = 0,
                  num_chunks: int = 1):
         num_envs = len(seeds)
         if num_workers and mp.current_process().daemon:  # Python forbids it: say what works
@@ -198,11 +198,11 @@ class SubprocBackend:
         if num_workers == 0 and inline_envs != num_envs:
             raise ValueError(f"num_workers=0 needs inline_envs = num_envs ({num_envs}), "
                              f"got {inline_envs}")
-        self.frames_layout = "pooled" if pool_screens else "pair"
+        self.frames_layout = frames_layout
         self.max_episode_frames = max_episode_frames
         ctx = mp.get_context("spawn")
         self.buffers = SharedBuffers.allocate(ctx, num_envs, frame_skip, want_screens,
-                                              final=autoreset)
+                                              final=autoreset, frames_layout=frames_layout)
         self.views = self.buffers.views()
         if num_workers and not 0 <= inline_envs < num_envs:
             raise ValueError(f"inline_envs must be in [0, num_envs - 1], got {inline_envs}")
@@ -223,7 +223,7 @@ class SubprocBackend:
                               frame_skip=frame_skip, per_frame=per_frame, event_mode=event_mode,
                               event_prob=event_prob, ram_obs_mode=ram_obs_mode,
                               want_screens=want_screens, max_episode_frames=max_episode_frames,
-                              autoreset=autoreset, pool_screens=pool_screens)
+                              autoreset=autoreset, frames_layout=frames_layout)
 
         # the calling process emulates its envs of each chunk while the workers run theirs
         self._inline_chunks = [[] for _ in self.chunks]

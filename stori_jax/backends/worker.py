@@ -27,7 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from stori_jax.backends.layout import RESET_RENDER_BITS, STEP_RENDER_BITS
+from stori_jax.backends.layout import RESET_RENDER_BITS, SCREEN, STEP_RENDER_BITS
+from stori_jax.pixels import OBSERVE
 
 
 def emulator_seed(seed: int, index: int) -> int:
@@ -63,7 +64,10 @@ class WorkerSpec:
     want_screens: bool
     max_episode_frames: int
     autoreset: bool = True
-    pool_screens: bool = False  # max-pool the two screens into slot 0 here
+    # how this process hands its screens over (stori_jax.pixels): "pair" (both, as made),
+    # "pooled" (max-pooled into slot 0 here), or the observation made here ("atari84",
+    # "dreamer64"), the screens staying in this process
+    frames_layout: str = "pair"
 
 
 class Emulator:
@@ -88,7 +92,11 @@ class Emulator:
         self.ram_obs = game.ram_obs_modes[spec.ram_obs_mode] if spec.ram_obs_mode is not None else None
         self.v = views
         self.ram = views["ram"][index]          # true RAM, written in place
-        self.frames = views["frames"][:, index]  # (2, 210, 160, 3), each slot contiguous
+        self.observe = OBSERVE.get(spec.frames_layout)  # the frame work done here, if any
+        if self.observe is None:  # the screens are handed over: written where the parent reads
+            self.frames = views["frames"][:, index]  # (2, 210, 160, 3), each slot contiguous
+        else:
+            self.frames = np.zeros((2,) + SCREEN, np.uint8)
         self.prev_ram = np.zeros(128, np.uint8)
         self.start_ram = np.zeros(128, np.uint8)
 
@@ -118,7 +126,7 @@ class Emulator:
             for slot, bit in enumerate(RESET_RENDER_BITS):
                 if v["ram_render"][i] & bit and self.render_ram_obs(slot):
                     rendered |= 1 << slot
-            self.pool()
+            self.publish()
         ale.getRAM(self.ram)
         v["ram_rendered"][i] = rendered
         v["lives"][i] = ale.lives()
@@ -156,9 +164,17 @@ class Emulator:
         self.episode_length = snap["episode_length"]
         self.ale.getRAM(self.ram)
 
-    def pool(self) -> None:
-        if self.spec.pool_screens:
+    def publish(self, final: bool = False) -> None:
+        """Hand the step's screens over as ``frames_layout`` says (into ``final_frames``: an
+        ended episode's, before the autoreset overwrites them)."""
+        layout = self.spec.frames_layout
+        if self.observe is not None:
+            self.observe(self.frames, self.v["final_frames" if final else "frames"][self.i])
+            return
+        if layout == "pooled":
             np.maximum(self.frames[0], self.frames[1], out=self.frames[0])
+        if final:
+            self.v["final_frames"][:, self.i] = self.frames
 
     def render_ram_obs(self, slot: int, event_active: bool = False) -> bool:
         """Screen ``slot`` <- the next frame under NOOP of a RAM-modified copy of the game.
@@ -263,14 +279,13 @@ class Emulator:
         if done and spec.autoreset:
             # the ended episode's last observation, then the next episode's first one
             if spec.want_screens:
-                self.pool()
-                v["final_frames"][:, i] = self.frames
+                self.publish(final=True)
             v["final_single_frame"][i] = single
             ale.getRAM(v["final_ram"][i])
             self.reset()
         else:
             if spec.want_screens:
-                self.pool()
+                self.publish()
             v["ram_rendered"][i] = rendered
             ale.getRAM(self.ram)
             v["lives"][i] = ale.lives()
