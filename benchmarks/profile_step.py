@@ -2,19 +2,18 @@
 time of it (XLA's threads included) and of its emulator workers, in ms per step of B envs.
 
     python benchmarks/profile_step.py                       # Breakout 3.1, B = 32, both obs
-    python benchmarks/profile_step.py --presets 3.1 1 --obs atari84 --batch 64 --chunks 1 2
+    python benchmarks/profile_step.py --presets 3.1 1 --obs atari84 --batch 64 --repeats 3
 
-Each configuration is run with the default worker split once per ``--chunks`` value: the
-batch's step handed back whole (1, the default of ``stori_jax.make``) or in k chunks, the JAX
-work of one chunk running on XLA's threads while the emulators run the next.  Phases of the
-calling process:
+Each configuration is run with the default worker split once per ``--frame-work`` value (the
+observation made by the emulating processes, or by JAX in this process: make's
+``frame_work``), ``--repeats`` times, interleaved.  Phases of the calling process:
 
 - send: actions checked, the step's draws (JAX, or numpy where nothing is random), inputs
   written, commands sent;
 - emulate here: the envs this process emulates itself;
 - wait: blocked on the workers' replies;
-- dispatch: the JAX end of each chunk handed to XLA (its inputs copied);
-- finish: waiting for XLA to finish and joining the chunks (the rest of recv);
+- finish: the JAX end (masks, pooling, preprocessing where the caller does them, the stack,
+  info) handed to XLA and finished (the rest of recv);
 - agent: the loop's own work between steps (random actions here).
 
 Writes benchmarks/results/profile-<date>-<host>[-options].{json,md}.
@@ -37,7 +36,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 from _checks import options_in_name, output_directory  # noqa: E402
 
-PHASES = ("send", "emulate here", "wait", "dispatch", "finish", "agent")
+PHASES = ("send", "emulate here", "wait", "finish", "agent")
 
 
 def _cpu_ms(pid: int) -> float:
@@ -47,15 +46,14 @@ def _cpu_ms(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) * 1000.0 / os.sysconf("SC_CLK_TCK")
 
 
-def profile(game: str, preset: str, obs: str, batch: int, steps: int, chunks: int,
+def profile(game: str, preset: str, obs: str, batch: int, steps: int,
             frame_work: str = "workers") -> dict:
     """ms per step of each phase, and CPU ms per step of this process and of the workers."""
     import jax
 
     import stori_jax
 
-    kwargs = dict(chunks=chunks, frame_work=frame_work)
-    env = stori_jax.make(game, preset, num_envs=batch, seed=0, obs=obs, **kwargs)
+    env = stori_jax.make(game, preset, num_envs=batch, seed=0, obs=obs, frame_work=frame_work)
     spent = dict.fromkeys(PHASES, 0.0)
 
     def timed(phase, fn):
@@ -72,8 +70,6 @@ def profile(game: str, preset: str, obs: str, batch: int, steps: int, chunks: in
     for emulator in inline:
         emulator.step = timed("emulate here", emulator.step)
     backend._wait_all = timed("wait", backend._wait_all)
-    if hasattr(env, "_finish_part"):  # chunked: each chunk's JAX work is dispatched apart
-        env._finish_part = timed("dispatch", env._finish_part)
     recv_total = [0.0]
     rng = np.random.default_rng(0)
     try:
@@ -102,12 +98,11 @@ def profile(game: str, preset: str, obs: str, batch: int, steps: int, chunks: in
         cpu_workers = sum(_cpu_ms(p) for p in pids) - cpu_workers
     finally:
         env.close()
-    in_recv = spent["emulate here"] + spent["wait"] + spent["dispatch"]
+    in_recv = spent["emulate here"] + spent["wait"]
     spent["finish"] = recv_total[0] - in_recv
     per_step = {phase: 1000 * spent[phase] / steps for phase in PHASES}
     return dict(game=game, preset=preset, obs=obs, B=batch, frame_work=frame_work,
                 frames_layout=env.plan.frames_layout, inline_envs=len(inline), workers=len(pids),
-                chunks=len(getattr(backend, "chunks", [None])),
                 steps_per_s=steps * batch / wall, wall_ms_per_step=1000 * wall / steps,
                 phases_ms=per_step, cpu_ms_here=cpu_here / steps,
                 cpu_ms_workers=cpu_workers / steps)
@@ -118,13 +113,13 @@ def markdown(rows, meta) -> str:
              "ms per agent step of B envs: the calling process's wall time by phase, then CPU "
              "time of the calling process (XLA's threads included) and of its workers.", "",
              "| game | preset | obs | B | frame work (frames sent) | split (workers + here) | "
-             "chunks | steps/s | wall ms | " + " | ".join(PHASES) + " | CPU here | CPU workers |",
-             "|" + "---|" * (11 + len(PHASES))]
+             "steps/s | wall ms | " + " | ".join(PHASES) + " | CPU here | CPU workers |",
+             "|" + "---|" * (10 + len(PHASES))]
     for r in rows:
         lines.append(
             f"| {r['game']} | {r['preset']} | {r['obs']} | {r['B']} | "
             f"{r.get('frame_work', 'caller')} ({r.get('frames_layout', 'pooled')}) | "
-            f"{r['workers']} + {r['inline_envs']} | {r['chunks']} | {r['steps_per_s']:.0f} | "
+            f"{r['workers']} + {r['inline_envs']} | {r['steps_per_s']:.0f} | "
             f"{r['wall_ms_per_step']:.2f} | "
             + " | ".join(f"{r['phases_ms'][p]:.2f}" for p in PHASES)
             + f" | {r['cpu_ms_here']:.2f} | {r['cpu_ms_workers']:.2f} |")
@@ -139,8 +134,6 @@ def main(argv=None):
     parser.add_argument("--obs", nargs="+", default=["raw", "atari84"])
     parser.add_argument("--batch", type=int, default=32)
     parser.add_argument("--steps", type=int, default=300, help="timed steps per run (default 300)")
-    parser.add_argument("--chunks", type=int, nargs="+", default=[1],
-                        help="chunks a step comes back in, one run each (default 1)")
     parser.add_argument("--frame-work", nargs="+", default=["workers", "caller"],
                         choices=["workers", "caller"],
                         help="where the frame work runs (make's frame_work), one run each "
@@ -156,17 +149,16 @@ def main(argv=None):
     for _ in range(args.repeats):
         for preset in args.presets:
             for obs in args.obs:
-                for chunks in args.chunks:
-                    for frame_work in args.frame_work:
-                        rows.append(profile(args.game, preset, obs, args.batch, args.steps,
-                                            chunks, frame_work))
+                for frame_work in args.frame_work:
+                    rows.append(profile(args.game, preset, obs, args.batch, args.steps,
+                                        frame_work))
     meta = dict(date=datetime.date.today().isoformat(), host=socket.gethostname(),
                 cores=len(os.sched_getaffinity(0)), load=os.getloadavg(), software=software(),
                 argv=sys.argv[1:] if argv is None else list(argv))
     args.out.mkdir(parents=True, exist_ok=True)
     stem = args.out / (f"profile-{meta['date']}-{meta['host']}" + options_in_name(
-        parser, args, dict(game="", presets="", obs="", batch="B", steps="steps", chunks="chunks",
-                           frame_work="", repeats="x")))
+        parser, args, dict(game="", presets="", obs="", batch="B", steps="steps", frame_work="",
+                           repeats="x")))
     Path(f"{stem}.json").write_text(json.dumps(dict(meta=meta, rows=rows), indent=1))
     table = markdown(rows, meta)
     Path(f"{stem}.md").write_text(table)

@@ -54,17 +54,22 @@ def cores() -> int:
 
 # -- the emulator limit ---------------------------------------------------------------------
 
-def _limit_worker(rom_id, n, seconds, start, out):
+def _limit_emulators(rom_id, n, first_seed=0):
     from ale_py import ALEInterface, LoggerMode, roms
 
     ALEInterface.setLoggerMode(LoggerMode.Error)
     emus = []
     for i in range(n):
         ale = ALEInterface()
-        ale.setInt("random_seed", i)
+        ale.setInt("random_seed", first_seed + i)
         ale.setFloat("repeat_action_probability", 0.0)
         ale.loadROM(roms.get_rom_path(rom_id))
         emus.append((ale, ale.getMinimalActionSet()))
+    return emus
+
+
+def _limit_worker(rom_id, n, seconds, start, out):
+    emus = _limit_emulators(rom_id, n)
     screens = np.zeros((n, 2, 210, 160, 3), np.uint8)
     ram = np.zeros((n, 128), np.uint8)
     rng = np.random.default_rng(0)
@@ -107,6 +112,59 @@ def emulator_limit(game, batch, workers, seconds):
     for p in procs:
         p.join()
     return float(np.median(per_window)) / (seconds / WINDOWS)
+
+
+def _lockstep_worker(rom_id, n, conn):
+    emus = _limit_emulators(rom_id, n, first_seed=1000)
+    screens, ram = np.zeros((n, 2, 210, 160, 3), np.uint8), np.zeros((n, 128), np.uint8)
+    rng = np.random.default_rng(1)
+    conn.send_bytes(b"K")
+    while conn.recv_bytes() == b"S":
+        _limit_step(emus, screens, ram, rng)
+        conn.send_bytes(b"K")
+
+
+def lockstep_ceiling(game, batch, cores, seconds):
+    """The ceiling of a lock-step process design, stori-jax's split: this process emulates its
+    share of bare emulators (the per-step work of ``emulator_limit``) while the workers emulate
+    theirs, one pipe byte each way per step, nothing else; agent steps per second."""
+    from stori_jax.builder import default_split
+    from stori_jax.games import get_game
+
+    rom_id = get_game(game).rom_id
+    workers, here = default_split(batch, cores)
+    ctx = mp.get_context("spawn")
+    conns, procs = [], []
+    for n in (hi - lo for lo, hi in _split(batch - here, workers)):
+        parent, child = ctx.Pipe()
+        procs.append(ctx.Process(target=_lockstep_worker, args=(rom_id, n, child)))
+        procs[-1].start()
+        conns.append(parent)
+    emus = _limit_emulators(rom_id, here)
+    screens, ram = np.zeros((here, 2, 210, 160, 3), np.uint8), np.zeros((here, 128), np.uint8)
+    rng = np.random.default_rng(0)
+    for conn in conns:
+        conn.recv_bytes()
+
+    def step(_actions):
+        for conn in conns:
+            conn.send_bytes(b"S")
+        _limit_step(emus, screens, ram, rng)
+        for conn in conns:
+            conn.recv_bytes()
+
+    try:
+        return _timed_loop(step, batch, 1, seconds)
+    finally:
+        for conn in conns:
+            conn.send_bytes(b"C")
+        for p in procs:
+            p.join()
+
+
+def _split(n, parts):
+    bounds = np.linspace(0, n, parts + 1).round().astype(int)
+    return list(zip(bounds[:-1], bounds[1:]))
 
 
 # -- peers ------------------------------------------------------------------------------------
@@ -263,6 +321,9 @@ def plan_measurements(args):
     for b in args.sizes if sweep else ():
         jobs.append(dict(kind="emulator limit", game="Breakout", preset="-", B=b, backend="-",
                          obs="raw", fn=lambda b=b: emulator_limit("Breakout", b, w, args.seconds)))
+        jobs.append(dict(kind="lock-step ceiling", game="Breakout", preset="-", B=b,
+                         backend="-", obs="raw",
+                         fn=lambda b=b: lockstep_ceiling("Breakout", b, w, args.seconds)))
         for obs in ("raw", "atari84"):  # each peer with stori-jax's observation's twin
             jobs.append(dict(kind=PEER_KINDS["envpool"][obs], game="Breakout", preset="-",
                              B=b, backend="envpool", obs=obs,
@@ -322,6 +383,8 @@ def run(args, jobs):
 def add_ratios(results):
     limits = {(r["game"], r["B"]): r["steps_per_s"] for r in results
               if r["kind"] == "emulator limit"}
+    ceilings = {(r["game"], r["B"]): r["steps_per_s"] for r in results
+                if r["kind"] == "lock-step ceiling" and r["steps_per_s"]}
     own_31 = {(r["game"], r["B"], r["obs"], r["backend"]): r["steps_per_s"] for r in results
               if r["kind"] == "stori-jax" and r["preset"] == "3.1"}
     naive_rate = {(r["game"], r["preset"], r["B"]): r["steps_per_s"] for r in results
@@ -335,6 +398,9 @@ def add_ratios(results):
         limit = limits.get((r["game"], r["B"]))
         r["vs_limit"] = rate / limit if limit else None
         if r["kind"] == "stori-jax":
+            ceiling = ceilings.get((r["game"], r["B"]))
+            if ceiling and r["backend"] == "subproc":
+                r["vs_ceiling"] = rate / ceiling
             base = own_31.get((r["game"], r["B"], r["obs"], r["backend"]))
             r["vs_own_3.1"] = rate / base if base else None
             n = naive_rate.get((r["game"], r["preset"], r["B"]))
@@ -388,6 +454,13 @@ def targets(results, batch: int) -> list[str]:
                 if "vs_best_peer" in r]
         raw = [r["vs_limit"] for r in rows(kind="stori-jax", game="Breakout", preset="3.1",
                                            backend="subproc", obs="raw", B=b) if r.get("vs_limit")]
+        for obs in ("raw", "atari84"):
+            ceiling = [r["vs_ceiling"] for r in rows(kind="stori-jax", game="Breakout",
+                                                     preset="3.1", backend="subproc", obs=obs,
+                                                     B=b) if r.get("vs_ceiling")]
+            if ceiling:
+                lines.append(f"- B = {b}: Breakout 3.1 {obs} / the lock-step ceiling = "
+                             f"{ceiling[0]:.2f} (target >= 0.95: {verdict(ceiling, 0.95)})")
         if peer:
             lines.append(f"- B = {b}: Breakout 3.1 atari84 / best peer (84x84 gray x4) = "
                          f"{peer[0]:.2f} (target >= 1.0: {verdict(peer, 1.0)})")
@@ -439,11 +512,14 @@ def markdown(results, meta) -> str:
              "W threads for raw envpool and ale-py; stori-jax uses its default worker split and "
              "envpool its own thread count. \"vs limit\" is to the emulator limit of the same "
              "game and B, \"vs naive\" to the naive baseline of the same preset and B, both "
-             "measured in this run. envpool rows run granularity='step'. \"concept 2\": the "
-             "share of a 2.2 preset's timed steps spent in concept 2.", "",
-             "| kind | game | preset | backend | obs | B | steps/s | vs limit | vs own 3.1 | "
-             "vs naive | atari84/raw | concept 2 | vs best peer | vs native envpool |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "measured in this run; \"vs ceiling\" to the lock-step ceiling (bare emulators in "
+             "stori-jax's split, one pipe byte each way a step). envpool rows run "
+             "granularity='step'. \"concept 2\": the share of a 2.2 preset's timed steps spent "
+             "in concept 2.", "",
+             "| kind | game | preset | backend | obs | B | steps/s | vs limit | vs ceiling | "
+             "vs own 3.1 | vs naive | atari84/raw | concept 2 | vs best peer | "
+             "vs native envpool |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     failed = []
     for r in results:
         run = f"{r['kind']} | {r['game']} | {r['preset']} | {r['backend']} | {r['obs']} | {r['B']}"
@@ -451,7 +527,8 @@ def markdown(results, meta) -> str:
             failed.append(f"- {run.replace(' | ', ' ')}: {r['error']}")
         lines.append(
             f"| {run} | {'failed' if 'error' in r else fmt(r['steps_per_s'], '.0f')} | "
-            f"{fmt(r.get('vs_limit'))} | {fmt(r.get('vs_own_3.1'))} | {fmt(r.get('vs_naive'))} | "
+            f"{fmt(r.get('vs_limit'))} | {fmt(r.get('vs_ceiling'))} | "
+            f"{fmt(r.get('vs_own_3.1'))} | {fmt(r.get('vs_naive'))} | "
             f"{fmt(r.get('atari84_vs_raw'))} | {fmt(r.get('concept2_share'))} | "
             f"{fmt(r.get('vs_best_peer'))} | {fmt(r.get('vs_native_envpool'))} |")
     if failed:

@@ -171,18 +171,6 @@ class EnvpoolBackend:
             self.pool.send(actions)
             self._pending = "step"
 
-    @property
-    def chunks(self) -> list[tuple[int, int]]:
-        return [(0, self.num_envs)]  # one chunk: the pool hands the batch over whole
-
-    @property
-    def chunks_left(self) -> int:
-        return 1 if self._pending == "step" else 0
-
-    def recv_chunk(self, timeout: float | None = None) -> tuple[int, int]:
-        self.recv()
-        return 0, self.num_envs
-
     def outputs(self) -> dict:
         return self.views
 

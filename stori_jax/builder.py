@@ -29,8 +29,7 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
          num_envs: int, seed: int, backend: str = "subproc", num_workers: int | None = None,
          obs: str | None = None, frame_skip: int = FRAME_SKIP, granularity: str | None = None,
          max_episode_frames: int = MAX_EPISODE_FRAMES, noop_max: int = 0, autoreset: bool = True,
-         inline_envs: int | None = None, chunks: int | None = None,
-         frame_work: str | None = None):
+         inline_envs: int | None = None, frame_work: str | None = None):
     """A batched STORI environment of ``num_envs`` emulators.
 
     Args:
@@ -41,11 +40,8 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
         backend: ``subproc`` (every mode) or ``envpool`` (see docs/semantics.md).
         num_workers, inline_envs: emulator processes, and envs emulated in this process while
             they run; by default one worker per core but one, and this process an equal
-            share (``num_workers=0``: every env here).
-        chunks: pieces the batch's step comes back in (default 1): the JAX work of one runs
-            while the emulators run the next, which pays only where XLA has cores the
-            emulators do not use.  The split and the chunks change the speed only: a seed gives
-            the same run with any.
+            share (``num_workers=0``: every env here).  The split changes the speed only: a
+            seed gives the same run with any.
         obs: ``raw`` (210x160x3), ``atari84`` (84x84 gray, 4 stacked; the default), ``dreamer64``
             (64x64 RGB) or ``ram`` (the 128 RAM bytes; the only choice for type 0).
         frame_skip, granularity: emulator frames per agent step; perturbations per ``frame``
@@ -86,11 +82,11 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
     if backend == "envpool":
         plan, emulators = build_envpool(plan, settings["seed"], settings["max_episode_frames"],
                                         num_workers=num_workers, inline_envs=inline_envs,
-                                        chunks=chunks, frame_work=frame_work)
+                                        frame_work=frame_work)
     else:
         plan, emulators = build_subproc(plan, settings["seed"], settings["max_episode_frames"],
                                         num_workers=num_workers, inline_envs=inline_envs,
-                                        chunks=chunks, frame_work=resolve_frame_work(frame_work))
+                                        frame_work=resolve_frame_work(frame_work))
     return Env(plan, cfg, settings["seed"], emulators)
 
 
@@ -237,7 +233,7 @@ def subproc_frames_layout(plan: Plan, frame_work: str) -> str:
 
 
 def build_subproc(plan: Plan, seed: int, max_episode_frames: int, *, num_workers,
-                  inline_envs, chunks=None, frame_work: str = "workers"):
+                  inline_envs, frame_work: str = "workers"):
     """(plan with its frames layout, the subproc backend) of a checked plan."""
     from stori_jax.backends.subproc import SubprocBackend
 
@@ -253,27 +249,16 @@ def build_subproc(plan: Plan, seed: int, max_episode_frames: int, *, num_workers
         event_mode=event.mode if event else None, event_prob=event.prob if event else 0.0,
         ram_obs_mode=mask.mode if mask is not None and mask.kind == "ram" else None,
         want_screens=wants_screens, max_episode_frames=max_episode_frames,
-        autoreset=plan.autoreset, frames_layout=plan.frames_layout, inline_envs=inline_envs,
-        num_chunks=chunk_count(plan.num_envs, chunks))
+        autoreset=plan.autoreset, frames_layout=plan.frames_layout, inline_envs=inline_envs)
     return plan, backend
 
 
-def chunk_count(num_envs: int, chunks: int | None) -> int:
-    """Chunks a step of the batch comes back in: ``chunks`` checked, or the default 1.  With 2,
-    the JAX work of one half runs while the emulators run the other: that needs a core the
-    emulators do not use, and on 2 cores it measured 0.75-0.9x of one chunk
-    (benchmarks/README.md), so it is opt-in."""
-    if chunks is None:
-        return 1
-    return check_int("chunks", chunks, 1, num_envs)
-
-
 def build_envpool(plan: Plan, seed: int, max_episode_frames: int, *, num_workers,
-                  inline_envs, chunks=None, frame_work=None):
+                  inline_envs, frame_work=None):
     """(plan with envpool's frames layout, the envpool backend); a ValueError names what
     needs the subproc backend."""
     for name, value in (("num_workers", num_workers), ("inline_envs", inline_envs),
-                        ("chunks", chunks), ("frame_work", frame_work)):
+                        ("frame_work", frame_work)):
         if value is not None:
             raise ValueError(f"{name} applies to backend='subproc' only (envpool runs its "
                              f"own threads); leave it None, got {value!r}")
@@ -285,7 +270,7 @@ def build_envpool(plan: Plan, seed: int, max_episode_frames: int, *, num_workers
 
 def emulator_seeds(seed: int, num_envs: int) -> list[int]:
     """ALE seeds of envs 0..B-1: a function of the seed and the env index alone."""
-    from stori_jax.backends.worker import emulator_seed
+    from stori_jax.backends.emulator import emulator_seed
 
     return [emulator_seed(seed, i) for i in range(num_envs)]
 

@@ -29,8 +29,7 @@ from stori_jax.backends.subproc import MAX_TIMEOUT_S
 from stori_jax.checks import MAX_SEED, check_actions, check_int, check_real, shown
 from stori_jax.config import Config
 from stori_jax.core import (FINAL_OUTPUTS, FRAME_OUTPUTS, STEP_OUTPUTS, Draws, EnvState,
-                            WorkerOutputs, before_step, ended, finish_step, frame_rows,
-                            initial_state, join_rows, rows_of)
+                            WorkerOutputs, before_step, ended, finish_step, initial_state)
 from stori_jax.errors import (ConcurrentUseError, EnvClosedError, EnvStateError,
                               InterruptedStepError, WorkersLateError)
 from stori_jax.functional.preprocess import ATARI84, DREAMER64, STACK
@@ -58,6 +57,10 @@ REFUSED = {
     ("send", Phase.NEEDS_RESET): f"call reset() first {_NEEDS_RESET}",
     ("send", Phase.IN_FLIGHT): "a step is already in flight: call recv() before send() again",
     ("send", Phase.XLA_DRIVEN): _XLA,
+    ("step", Phase.NEEDS_RESET): f"call reset() first {_NEEDS_RESET}",
+    ("step", Phase.IN_FLIGHT): ("a step is already in flight (send() started it): call recv() "
+                                "to finish it before step()"),
+    ("step", Phase.XLA_DRIVEN): _XLA,
     ("recv", Phase.READY): "nothing in flight: call send(actions) first",
     ("recv", Phase.NEEDS_RESET): f"nothing in flight, and the env needs reset() {_NEEDS_RESET}",
     ("recv", Phase.XLA_DRIVEN): _XLA,
@@ -121,14 +124,14 @@ class Env:
         self._running = None  # the public call under way
         self._phase = Phase.NEEDS_RESET
         self._jit_plan = jit_key(plan)
-        self._part_plans = {}  # the plan of a chunk of the batch, by its size
         self._zero_draws = None
         # nothing random happens before the emulators run: skip the JAX call of send()
         self._deterministic_before_step = (
             plan.noise is None and plan.event is None and plan.mask is None
             and plan.drift_schedule is None and plan.noop_max == 0)
         self._state = initial_state(plan, seed)
-        self._in_flight = None  # (state, draws, resets, finished chunks) while IN_FLIGHT
+        self._episode_end_compiled = False  # see _compile_episode_end
+        self._in_flight = None  # (state, draws, resets) of the step IN_FLIGHT
         self._restart_due = False  # reset(seed=...) asked, and no reset has completed since
         self._reset_pending = np.zeros(plan.num_envs, bool)  # envs to reset on the next step
         # stepping through env.xla(): the current chain of handles and its steps so far
@@ -264,7 +267,8 @@ class Env:
             self.backend.send_reset(self.seed if self._restart_due else None)
             out = self._wait(deadline, timeout, late)
             everyone = np.ones(self.num_envs, bool)
-            (obs, _, _, _, info), _ = self._finish(state, draws, out, everyone)
+            self._state, (obs, _, _, _, info), _ = self._finish(state, draws, out, everyone)
+            self._compile_episode_end(self._state, out)
             # the record last, one fact per statement: a Ctrl-C between them leaves an env that
             # still needs reset(), never one that steps with an earlier step's resets due
             self._reset_pending[:] = False
@@ -286,14 +290,13 @@ class Env:
                              f"{type(self.backend).__name__} cannot bound its wait")
         return time.monotonic() + timeout
 
-    def _wait(self, deadline: float | None, timeout, late: str, chunk: bool = False):
-        """The backend's recv (of the next chunk only, with ``chunk``), bounded by
-        ``deadline``; late workers: TimeoutError ending in the caller's advice ``late``."""
-        receive = self.backend.recv_chunk if chunk else self.backend.recv
+    def _wait(self, deadline: float | None, timeout, late: str):
+        """The backend's recv, bounded by ``deadline``; late workers: TimeoutError ending in
+        the caller's advice ``late``."""
         if deadline is None:
-            return receive()
+            return self.backend.recv()
         try:
-            return receive(timeout=max(0.0, deadline - time.monotonic()))
+            return self.backend.recv(timeout=max(0.0, deadline - time.monotonic()))
         except WorkersLateError as e:
             raise TimeoutError(f"{e} within {float(timeout):g} s; {late}") from None
 
@@ -314,7 +317,7 @@ class Env:
             self._write_inputs(draws, reset_first=self._reset_pending)
             with interrupts_deferred():  # the workers have the step, and this env knows it
                 self.backend.send_step()
-                self._in_flight = (state, draws, self._reset_pending.copy(), [])
+                self._in_flight = (state, draws, self._reset_pending.copy())
                 self._phase = Phase.IN_FLIGHT
 
     def recv(self, timeout: float | None = None):
@@ -331,21 +334,12 @@ class Env:
         """
         with self._call("recv"):
             deadline = self._deadline(timeout, "recv")
-            state, draws, was_reset, parts = self._in_flight
+            state, draws, was_reset = self._in_flight
             late = "it is still in flight: call recv() again to keep waiting, or close() the env"
             try:
-                # chunk by chunk: while the emulators run the next chunk, this chunk's JAX work
-                # (masks, pooling, preprocessing, stack) runs on XLA's threads
-                while True:
-                    given = len(self.backend.chunks) - self.backend.chunks_left
-                    if len(parts) < given:  # a chunk received, not yet finished
-                        lo, hi = self.backend.chunks[len(parts)]
-                        parts.append(self._finish_part(lo, hi, state, draws, was_reset))
-                    elif self.backend.chunks_left:
-                        self._wait(deadline, timeout, late, chunk=True)
-                    else:
-                        break
-                state, result, pending = self._assemble(parts)
+                state, result, pending = self._finish(state, draws,
+                                                      self._wait(deadline, timeout, late),
+                                                      was_reset)
             except BaseException:
                 # interrupted (Ctrl-C) or timed out while waiting for the workers: the step
                 # stays in flight and the next recv() resumes it.  Interrupted inside this
@@ -555,49 +549,38 @@ class Env:
          views["ram_render"][...], views["noops"][...]) = host
         views["reset_first"][...] = 0 if reset_first is None else reset_first
 
+    def _compile_episode_end(self, state, out) -> None:
+        """Compile, once, the step that ends an episode (it hands over the ended episodes' last
+        screens too: another compilation), so that no step compiles, where a Ctrl-C would
+        most likely land.  The result is thrown away: nothing changes."""
+        if not self.plan.autoreset or self._episode_end_compiled:
+            return
+        zeros = np.zeros(self.num_envs, np.int32)
+        if self._deterministic_before_step:
+            draws = self._host_draws(zeros)
+        else:
+            _, draws = before_step(self._jit_plan, state, zeros)
+        outputs = WorkerOutputs(**{name: out[name] for name in STEP_OUTPUTS + FINAL_OUTPUTS})
+        jax.block_until_ready(finish_step(self._jit_plan, state, draws, outputs,
+                                          np.zeros(self.num_envs, bool)))
+        self._episode_end_compiled = True
+
     def _finish(self, state, draws, out, reset_first):
-        """((obs, reward, terminated, truncated, info), envs due for a reset) of the workers'
-        outputs ``out`` for the whole batch; the env's state moves on."""
+        """(state, (obs, reward, terminated, truncated, info), envs due for a reset) of the
+        workers' outputs ``out`` for the whole batch (read before this returns: the workers
+        overwrite their buffers on the next send)."""
         state, result, pending = finish_step(self._jit_plan, state, draws,
                                              self._worker_outputs(out), reset_first)
-        # the workers overwrite their buffers on the next send: finish reading them now
         jax.block_until_ready(result)
-        self._state = state
-        return result, pending
+        return state, result, pending
 
-    def _worker_outputs(self, out, lo: int = 0, hi: int | None = None) -> WorkerOutputs:
-        """The backend's outputs of envs [lo, hi) (numpy views), the final_* ones only where
-        an episode of them ended (the step compiled without them elsewhere)."""
-        if hi is None or (lo, hi) == (0, self.num_envs):
-            rows = {name: out[name] for name in STEP_OUTPUTS + FINAL_OUTPUTS if name in out}
-        else:
-            rows = {name: frame_rows(out[name], lo, hi, self.plan.frames_layout)
-                    if name in FRAME_OUTPUTS else out[name][lo:hi]
-                    for name in STEP_OUTPUTS + FINAL_OUTPUTS if name in out}
-        outputs = WorkerOutputs(**{name: rows[name] for name in STEP_OUTPUTS})
+    def _worker_outputs(self, out) -> WorkerOutputs:
+        """The backend's outputs (numpy views), the final_* ones only where an episode ended
+        (the step compiled without them elsewhere)."""
+        outputs = WorkerOutputs(**{name: out[name] for name in STEP_OUTPUTS})
         if self.plan.autoreset and ended(outputs).any():  # the ended episodes' last observations
-            outputs = outputs._replace(**{name: rows[name] for name in FINAL_OUTPUTS})
+            outputs = outputs._replace(**{name: out[name] for name in FINAL_OUTPUTS})
         return outputs
-
-    def _finish_part(self, lo: int, hi: int, state, draws, reset_first):
-        """Dispatch the JAX end of the step for envs [lo, hi) (it runs on XLA's threads while
-        the emulators go on): (state, result, pending) of those envs."""
-        out = self._worker_outputs(self.backend.outputs(), lo, hi)
-        if (lo, hi) == (0, self.num_envs):
-            return finish_step(self._jit_plan, state, draws, out, reset_first)
-        plan = self._part_plans.get(hi - lo)
-        if plan is None:
-            plan = self._part_plans[hi - lo] = dataclasses.replace(self._jit_plan,
-                                                                     num_envs=hi - lo)
-        state, draws = rows_of(state, draws, lo, hi - lo)
-        return finish_step(plan, state, draws, out, reset_first[lo:hi])
-
-    def _assemble(self, parts):
-        """(state, result, pending) of the whole batch from its chunks' (in order), once every
-        output has been read (the workers overwrite their buffers on the next send)."""
-        whole = parts[0] if len(parts) == 1 else join_rows(parts)
-        jax.block_until_ready(whole[1])
-        return whole
 
     def __repr__(self):
         return (f"Env({self.plan.game}, {self.config.describe()}, num_envs={self.num_envs}, "

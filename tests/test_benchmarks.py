@@ -303,6 +303,7 @@ def test_a_full_run_measures_every_preset_and_the_breakout_sweep(monkeypatch):
 
     for b in (8, 32, 64):
         assert ("emulator limit", "Breakout", "-", b, "-", "raw") in keys
+        assert ("lock-step ceiling", "Breakout", "-", b, "-", "raw") in keys
         for obs in ("raw", "atari84"):  # each peer beside each of stori-jax's observations
             for peer, backend in (("envpool", "envpool"), ("ale-py", "ale-py")):
                 assert (throughput.PEER_KINDS[peer][obs], "Breakout", "-", b, backend,
@@ -322,7 +323,7 @@ def test_a_full_run_measures_every_preset_and_the_breakout_sweep(monkeypatch):
     assert throughput.envpool_supports("Gopher", "2.2")
     assert not throughput.envpool_supports("Boxing", "2.2")  # RAM-obs
     assert not throughput.envpool_supports("Breakout", "2.1")  # events write the RAM
-    assert len(keys) == 3 * 7 + 3 * 3 + 24 * 3 - 2 + sum(
+    assert len(keys) == 3 * 8 + 3 * 3 + 24 * 3 - 2 + sum(
         2 * throughput.envpool_supports(g, p) for g, p in stori_jax.list_presets())
 
 
@@ -396,7 +397,7 @@ def test_the_table_columns_hold_what_their_headers_say(monkeypatch):
     row = rows[-1]
     assert row == {"kind": "stori-jax", "game": "Breakout", "preset": "2.2",
                    "backend": "subproc", "obs": "atari84", "B": "32", "steps/s": "1500",
-                   "vs limit": "0.30", "vs own 3.1": "-", "vs naive": "1.50",
+                   "vs limit": "0.30", "vs ceiling": "-", "vs own 3.1": "-", "vs naive": "1.50",
                    "atari84/raw": "0.75", "concept 2": "0.75", "vs best peer": "-",
                    "vs native envpool": "-"}
     assert rows[-2]["vs own 3.1"] == "0.80" and rows[-2]["concept 2"] == "0.25"
@@ -469,6 +470,7 @@ def test_a_run_measures_and_records_with_the_workers_and_seconds_asked(monkeypat
             asked.append((workers, seconds)) or rate)
 
     monkeypatch.setattr(throughput, "emulator_limit", peer(1000.0))
+    monkeypatch.setattr(throughput, "lockstep_ceiling", peer(600.0))
     monkeypatch.setattr(throughput, "envpool_peer", peer(900.0))
     monkeypatch.setattr(throughput, "ale_vector", peer(800.0))
     monkeypatch.setattr(throughput, "stori", lambda game, preset, batch, seconds, obs, backend: (
@@ -1124,10 +1126,10 @@ def test_a_step_profile_has_a_row_per_frame_work_placement_and_its_options_in_th
     profile_step = script(monkeypatch, "profile_step")
     asked = []
 
-    def fake(game, preset, obs, batch, steps, chunks, frame_work):
+    def fake(game, preset, obs, batch, steps, frame_work):
         asked.append((obs, batch, frame_work))
         return dict(game=game, preset=preset, obs=obs, B=batch, inline_envs=8, workers=1,
-                    chunks=chunks, frame_work=frame_work, frames_layout="pooled",
+                    frame_work=frame_work, frames_layout="pooled",
                     steps_per_s=1000.0, wall_ms_per_step=32.0,
                     phases_ms=dict.fromkeys(profile_step.PHASES, 1.0), cpu_ms_here=20.0,
                     cpu_ms_workers=10.0)

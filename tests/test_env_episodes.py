@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import stori_jax
 from stori_jax import ActionNoise, ConceptDrift, Config, ObservationMask, RandomEvent
 
 from _env_support import NOOP, make, random_actions, run_env
@@ -206,3 +207,19 @@ def test_reset_clears_the_reset_a_finished_episode_left_pending():
         assert not info["reset_step"][0] and int(info["executed_action"][0]) == 1
     finally:
         env.close()
+
+
+def test_no_step_after_the_first_compiles_not_even_at_an_episode_end():
+    """The step that ends an episode hands over the ended episodes' screens too: compiled at
+    reset, not at the first episode end (a second's pause mid-run, where Ctrl-C would land)."""
+    from stori_jax import core
+
+    with stori_jax.make("Breakout", "3.1", num_envs=1, seed=0, max_episode_frames=40) as env:
+        env.reset()
+        env.step([0])
+        compiled = core.after_step._cache_size(), core.push_frames._cache_size()
+        ended = 0
+        for _ in range(12):
+            ended += int(np.asarray(env.step([1])[3]).sum())
+        assert ended >= 1
+        assert (core.after_step._cache_size(), core.push_frames._cache_size()) == compiled

@@ -722,7 +722,7 @@ def test_an_interrupt_after_the_emulators_finished_requires_a_reset():
     env = make("Breakout")
     try:
         env.reset()
-        with interrupting(env, "_finish_part"), pytest.raises(KeyboardInterrupt):
+        with interrupting(env, "_finish"), pytest.raises(KeyboardInterrupt):
             env.step([0, 1])
         assert_points_to_reset(env)
         env.reset()
@@ -983,6 +983,9 @@ def test_a_second_send_is_refused_and_leaves_the_step_in_flight_untouched():
             env.send(actions)
             with pytest.raises(RuntimeError, match="already in flight"):
                 env.send(np.array([2, 2], np.int32))
+            with pytest.raises(RuntimeError, match=r"already in flight \(send\(\) started it\): "
+                               r"call recv\(\) to finish it before step\(\)"):
+                env.step(np.array([2, 2], np.int32))
             with pytest.raises(RuntimeError, match="already in flight"):
                 env.backend.send_step()
         assert_same_steps(env, twin, env.recv(timeout=30), actions)
@@ -1233,14 +1236,14 @@ def test_a_call_from_a_second_thread_during_a_call_is_refused_and_changes_nothin
     try:
         env.reset(), twin.reset()
         waiting, release, outcome = threading.Event(), threading.Event(), {}
-        real_recv = env.backend.recv_chunk
+        real_recv = env.backend.recv
 
         def held_recv(*args, **kwargs):
             waiting.set()
             release.wait(10)
             return real_recv(*args, **kwargs)
 
-        env.backend.recv_chunk = held_recv
+        env.backend.recv = held_recv
         first = threading.Thread(target=lambda: outcome.update(step=env.step([1, 2])))
         first.start()
         assert waiting.wait(10)
@@ -1251,7 +1254,7 @@ def test_a_call_from_a_second_thread_during_a_call_is_refused_and_changes_nothin
             calls[second]()
         release.set()
         first.join(10)
-        env.backend.recv_chunk = real_recv
+        env.backend.recv = real_recv
         for x, y in zip(outcome["step"][:4], twin.step([1, 2])[:4]):
             np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
         for a in ([3, 1], [0, 2]):  # and the env goes on as the twin

@@ -38,18 +38,6 @@ class Backend(Protocol):
     def send_step(self) -> None:
         """Step every emulator with the inputs in ``views``."""
 
-    @property
-    def chunks(self) -> list[tuple[int, int]]:
-        """The [lo, hi) env ranges whose outputs a step hands over one after the other."""
-
-    @property
-    def chunks_left(self) -> int:
-        """Chunks of the step in flight not yet handed over by :meth:`recv_chunk`."""
-
-    def recv_chunk(self, timeout: float | None = None) -> tuple[int, int]:
-        """Wait for the next chunk of the step in flight; its [lo, hi).  Its outputs are in
-        :meth:`outputs` until the next send."""
-
     def recv(self, timeout: float | None = None) -> dict[str, np.ndarray]:
         """Wait for the whole command in flight; :meth:`outputs` (``WorkersLateError`` past
         ``timeout``, the command still pending)."""

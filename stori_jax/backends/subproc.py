@@ -24,7 +24,8 @@ import numpy as np
 
 from stori_jax.backends.interrupts import interrupts_deferred
 from stori_jax.backends.layout import SharedBuffers
-from stori_jax.backends.worker import WorkerSpec, reset_command, reset_seed, worker_main
+from stori_jax.backends.emulator import EmulatorSpec
+from stori_jax.backends.worker import reset_command, reset_seed, worker_main
 from stori_jax.errors import (EnvClosedError, InterruptedStepError, WorkerError,  # noqa: F401
                               WorkersLateError)
 
@@ -47,27 +48,13 @@ def split_batch(num_envs: int, num_workers: int) -> list[tuple[int, int]]:
     return bounds
 
 
-def chunk_bounds(num_envs: int, num_chunks: int) -> list[tuple[int, int]]:
-    """The [lo, hi) env ranges of the batch's chunks, as even as possible."""
-    return split_batch(num_envs, max(1, min(num_chunks, num_envs)))
-
-
-def assign_envs(num_envs: int, num_workers: int, inline_envs: int,
-                num_chunks: int) -> tuple[list[tuple[int, ...]], list[list[tuple[int, ...]]]]:
-    """Which process emulates which env: (the calling process's envs per chunk, each worker's
-    envs per chunk).  Each chunk is a contiguous range of the batch, shared out as the whole
-    batch is: its first envs to the calling process (``inline_envs`` in all, spread evenly over
-    the chunks), the rest split evenly between the workers.  With one chunk: envs
-    0..inline_envs-1 here, then each worker a contiguous range."""
-    chunks = chunk_bounds(num_envs, num_chunks)
-    inline_sizes = [hi - lo for lo, hi in split_batch(inline_envs, len(chunks))]
-    inline, workers = [], [[] for _ in range(num_workers)]
-    for (lo, hi), here in zip(chunks, inline_sizes):
-        here = min(here, hi - lo)
-        inline.append(tuple(range(lo, lo + here)))
-        for w, (a, b) in enumerate(split_batch(hi - lo - here, num_workers)):
-            workers[w].append(tuple(range(lo + here + a, lo + here + b)))
-    return inline, workers
+def assign_envs(num_envs: int, num_workers: int,
+                inline_envs: int) -> tuple[tuple[int, ...], list[tuple[int, ...]]]:
+    """Which process emulates which env: (the calling process's envs, each worker's): envs
+    0..inline_envs-1 here, then each worker a contiguous range, as even as possible."""
+    workers = [tuple(range(inline_envs + lo, inline_envs + hi))
+               for lo, hi in split_batch(num_envs - inline_envs, num_workers)]
+    return tuple(range(inline_envs)), workers
 
 
 def describe_envs(envs) -> str:
@@ -184,8 +171,7 @@ class SubprocBackend:
     def __init__(self, *, game: str, seeds: list[int], num_workers: int, frame_skip: int,
                  per_frame: bool, event_mode: int | None, event_prob: float,
                  ram_obs_mode: int | None, want_screens: bool, max_episode_frames: int,
-                 autoreset: bool = True, frames_layout: str = "pair", inline_envs: int = 0,
-                 num_chunks: int = 1):
+                 autoreset: bool = True, frames_layout: str = "pair", inline_envs: int = 0):
         num_envs = len(seeds)
         if num_workers and mp.current_process().daemon:  # Python forbids it: say what works
             raise RuntimeError(
@@ -206,10 +192,7 @@ class SubprocBackend:
         self.views = self.buffers.views()
         if num_workers and not 0 <= inline_envs < num_envs:
             raise ValueError(f"inline_envs must be in [0, num_envs - 1], got {inline_envs}")
-        inline_chunks, worker_chunks = assign_envs(num_envs, num_workers, inline_envs,
-                                                   num_chunks)
-        self.chunks = chunk_bounds(num_envs, num_chunks)  # one step: one round a chunk
-        self.worker_envs = [sorted(i for chunk in w for i in chunk) for w in worker_chunks]
+        inline, self.worker_envs = assign_envs(num_envs, num_workers, inline_envs)
         self.processes, self.conns = [], []
         self.owner_pid = os.getpid()
         self._scratch = []  # folders of restore files the workers are still to read
@@ -217,26 +200,24 @@ class SubprocBackend:
                                            self.owner_pid, self._scratch)
         _LIVE_BACKENDS.add(self)
 
-        def spec_for(chunks):
-            return WorkerSpec(game=game, chunks=tuple(chunks),
-                              seeds=tuple(seeds[i] for chunk in chunks for i in chunk),
+        def spec_for(envs):
+            return EmulatorSpec(game=game, envs=tuple(envs), seeds=tuple(seeds[i] for i in envs),
                               frame_skip=frame_skip, per_frame=per_frame, event_mode=event_mode,
                               event_prob=event_prob, ram_obs_mode=ram_obs_mode,
                               want_screens=want_screens, max_episode_frames=max_episode_frames,
                               autoreset=autoreset, frames_layout=frames_layout)
 
-        # the calling process emulates its envs of each chunk while the workers run theirs
-        self._inline_chunks = [[] for _ in self.chunks]
-        if inline_envs:
-            from stori_jax.backends.worker import make_emulators
+        # the calling process emulates its envs while the workers run theirs
+        self._inline = []
+        if inline:
+            from stori_jax.backends.emulator import make_emulators
 
-            self._inline_chunks = make_emulators(spec_for(inline_chunks), self.views)
-        self._inline = [e for chunk in self._inline_chunks for e in chunk]  # in batch order
-        self._inline_work, self._inline_next, self._inline_broken = None, 0, None
-        for chunks in worker_chunks:
+            self._inline = make_emulators(spec_for(inline), self.views)
+        self._inline_command, self._inline_next, self._inline_broken = None, 0, None
+        for envs in self.worker_envs:
             parent_conn, child_conn = ctx.Pipe(duplex=True)
             process = ctx.Process(target=worker_main, daemon=True,
-                                  args=(spec_for(chunks), self.buffers, child_conn, os.getpid()),
+                                  args=(spec_for(envs), self.buffers, child_conn, os.getpid()),
                                   name=f"stori-jax-worker-{len(self.processes)}")
             with _main_module_not_reimported():
                 process.start()
@@ -268,29 +249,23 @@ class SubprocBackend:
         still owe, only a reset continues (their replies are awaited by it)."""
         return self._inline_broken is not None
 
-    @property
-    def chunks_left(self) -> int:
-        """Chunks of the step in flight whose outputs :meth:`recv_chunk` has not yet given."""
-        return self._rounds if self._what == "a step" else 0
+    def _send_all(self, message: bytes) -> None:
+        """Send every worker ``message``: one reply each."""
+        self._send_each([message] * len(self.conns))
 
-    def _send_all(self, *messages: bytes) -> None:
-        """Send every worker each of ``messages``: one round of replies each."""
-        self._send_each([list(messages)] * len(self.conns), rounds=len(messages))
-
-    def _send_each(self, messages: list[list[bytes]], rounds: int = 1) -> None:
-        """Send each worker its messages (the same number each: one round of replies each)."""
+    def _send_each(self, messages: list[bytes]) -> None:
+        """Send each worker its message: one reply each."""
         if self.closed:
             raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
         if self._rounds:
             raise RuntimeError("a step is already in flight: call recv() before sending again")
         with interrupts_deferred():  # every worker gets the command, and the record says so
-            for w, (conn, mine) in enumerate(zip(self.conns, messages, strict=True)):
-                for message in mine:
-                    try:
-                        conn.send_bytes(message)
-                    except (OSError, ValueError):
-                        self._raise_dead(w, "while sending a command")
-            self._rounds = rounds
+            for w, (conn, message) in enumerate(zip(self.conns, messages, strict=True)):
+                try:
+                    conn.send_bytes(message)
+                except (OSError, ValueError):
+                    self._raise_dead(w, "while sending a command")
+            self._rounds = 1
 
     def _envs_of(self, w: int) -> str:
         return f"envs {describe_envs(self.worker_envs[w])}"
@@ -366,33 +341,29 @@ class SubprocBackend:
         command = reset_command(seed)
         with interrupts_deferred():
             self._send_all(command)
-            self._inline_work = [(self._inline, command)]
+            self._inline_command = command
             self._what = "a reset"
 
     def send_step(self) -> None:
-        """Step every emulator: one command a chunk to each worker, all sent now; the replies
-        come chunk by chunk (:meth:`recv_chunk`)."""
-        commands = [b"S%d" % c for c in range(len(self.chunks))]
+        """Step every emulator: the workers start at once, this process's envs in recv()."""
         with interrupts_deferred():
-            self._send_all(*commands)
-            self._inline_work = [(chunk, b"S") for chunk in self._inline_chunks]
+            self._send_all(b"S")
+            self._inline_command = b"S"
             self._what = "a step"
 
-    def recv_chunk(self, timeout: float | None = None) -> tuple[int, int]:
-        """Wait for the next chunk of the step in flight: emulate this process's envs of it,
-        then wait for the workers' (at most ``timeout`` seconds, then
-        :class:`WorkersLateError` with the chunk still pending).  Returns its env range
-        [lo, hi); its outputs are in ``views`` until the next send."""
+    def recv(self, timeout: float | None = None) -> dict[str, np.ndarray]:
+        """Finish the command in flight: emulate this process's envs, then wait for the
+        workers' (at most ``timeout`` seconds, then :class:`WorkersLateError` with the command
+        still pending: a later recv() resumes it).  The outputs stay valid until the next send."""
         if self.closed:
             raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
         if not self._rounds:
             raise RuntimeError("nothing in flight: call send_step() or send_reset() first")
-        index = len(self._inline_work) - self._rounds if self._inline_work else 0
-        if self._inline_work and self._inline_broken is None:
-            emulators, command = self._inline_work[index]
+        command = self._inline_command
+        if command is not None and self._inline_broken is None:
             # one emulator at a time, so that an interrupted recv() resumes where it stopped
-            while self._inline_next < len(emulators):
-                emulator = emulators[self._inline_next]
+            while self._inline_next < len(self._inline):
+                emulator = self._inline[self._inline_next]
                 try:
                     if command == b"S":
                         emulator.step()
@@ -404,26 +375,12 @@ class SubprocBackend:
                     raise
                 self._inline_next += 1
         self._wait_all(self._what, timeout)
-        self._inline_next = 0  # this chunk's envs here are done (a resumed wait skips them)
-        if not self._rounds:
-            self._inline_work = None
-        if self._inline_broken is not None and not self._rounds:
+        self._inline_next, self._inline_command = 0, None
+        if self._inline_broken is not None:
             env, self._inline_broken = self._inline_broken, None
             raise InterruptedStepError(
                 f"a step was interrupted while env {env} was being emulated in this process; "
                 "its emulator is half a step ahead: call reset() before stepping again")
-        return self.chunks[index] if self._what == "a step" else (0, len(self.views["reward"]))
-
-    def recv(self, timeout: float | None = None) -> dict[str, np.ndarray]:
-        """Wait for the whole command in flight (every chunk left); as :meth:`recv_chunk`,
-        the timeout bounding the whole wait.  The views stay valid until the next send."""
-        if self.closed:
-            raise EnvClosedError("this environment is closed; make a new one with stori_jax.make")
-        if not self._rounds:
-            raise RuntimeError("nothing in flight: call send_step() or send_reset() first")
-        deadline = None if timeout is None else time.monotonic() + timeout
-        while self._rounds:
-            self.recv_chunk(None if deadline is None else max(0.0, deadline - time.monotonic()))
         return self.outputs()
 
     def outputs(self) -> dict[str, np.ndarray]:
@@ -469,7 +426,7 @@ class SubprocBackend:
             with open(path, "wb") as file:
                 pickle.dump([states[i] for i in envs], file)
             commands.append(b"L" + os.fsencode(path))
-        self._send_each([[command] for command in commands])
+        self._send_each(commands)
         self._what = "a restore"
         for emulator in self._inline:
             emulator.restore(states[emulator.i])

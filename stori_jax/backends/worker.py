@@ -1,41 +1,23 @@
-"""The emulator worker: owns a slice of the batch's ALE emulators and steps them on command.
+"""The emulator worker process: owns a slice of the batch's emulators
+(``stori_jax.backends.emulator``) and steps them on command.
 
-Deterministic: everything random arrives in the shared buffers (executed actions, event
-uniforms, RAM-obs render decisions, reset no-ops).  Imports numpy, ale-py and the game tables
-only (no JAX), so it starts fast.
-
-Protocol over a Pipe, one command a message: b"S" + a chunk number in ASCII: step this
-worker's envs of that chunk of the batch (a step of the batch is one such command per chunk,
-sent together, replied to one by one, so that the parent can finish a chunk while the next
-is emulated), b"R" reset all (b"R" + a seed in ASCII: first restart every emulator from that
-batch seed, as a new env of it), b"C" close, b"P" snapshot (the reply carries the pickled
-emulator states), b"L" + the path of a file of pickled states: restore (a file, so that every
-command stays small: see interrupts.py).  Replies: b"K" done (+ a payload for b"P"), or b"E"
-+ a traceback.
+Protocol over a Pipe, one command a message: b"S" step this worker's envs, b"R" reset all
+(b"R" + a seed in ASCII: first restart every emulator from that batch seed, as a new env of
+it), b"C" close, b"P" snapshot (the reply carries the pickled emulator states), b"L" + the
+path of a file of pickled states: restore (a file, so that every command stays small: see
+interrupts.py).  Replies: b"K" done (+ a payload for b"P"), or b"E" + a traceback.
 """
 
 from __future__ import annotations
 
-import copy
 import os
 import pickle
 import signal
 import threading
 import time
 import traceback
-from dataclasses import dataclass
 
-import numpy as np
-
-from stori_jax.backends.layout import RESET_RENDER_BITS, SCREEN, STEP_RENDER_BITS
-from stori_jax.pixels import OBSERVE
-
-
-def emulator_seed(seed: int, index: int) -> int:
-    """The ALE seed of env ``index`` of a batch seeded ``seed``: a function of the two alone, so
-    a seed gives the same emulators however the batch is split between processes."""
-    return int(np.random.SeedSequence([seed, index]).generate_state(1)[0] & 0x7FFFFFFF)
-
+from stori_jax.backends.emulator import EmulatorSpec, make_emulators
 
 def reset_command(batch_seed: int | None) -> bytes:
     """The command that resets every emulator (from ``batch_seed`` afresh, unless None)."""
@@ -45,260 +27,6 @@ def reset_command(batch_seed: int | None) -> bytes:
 def reset_seed(command: bytes) -> int | None:
     """The batch seed a reset command restarts from (None: a plain reset)."""
     return int(command[1:]) if len(command) > 1 else None
-
-
-@dataclass(frozen=True)
-class WorkerSpec:
-    """Everything a worker needs besides its buffers and pipe (picklable).  ``chunks``: the
-    batch indices of this worker's envs in each chunk of the batch (a step command names the
-    chunk to step); ``seeds``: their ALE seeds, in the same order, flattened."""
-
-    game: str
-    chunks: tuple[tuple[int, ...], ...]
-    seeds: tuple[int, ...]
-    frame_skip: int
-    per_frame: bool
-    event_mode: int | None
-    event_prob: float
-    ram_obs_mode: int | None
-    want_screens: bool
-    max_episode_frames: int
-    autoreset: bool = True
-    # how this process hands its screens over (stori_jax.pixels): "pair" (both, as made),
-    # "pooled" (max-pooled into slot 0 here), or the observation made here ("atari84",
-    # "dreamer64"), the screens staying in this process
-    frames_layout: str = "pair"
-
-
-class Emulator:
-    """One ALE emulator and its per-episode STORI bookkeeping."""
-
-    def __init__(self, spec: WorkerSpec, game, seed: int, index: int, views: dict):
-        from ale_py import ALEInterface, LoggerMode, roms
-
-        ALEInterface.setLoggerMode(LoggerMode.Error)
-        ale = ALEInterface()
-        ale.setInt("random_seed", int(seed))
-        ale.setFloat("repeat_action_probability", 0.0)
-        ale.setInt("max_num_frames_per_episode", int(spec.max_episode_frames))
-        self.rom_path = roms.get_rom_path(game.rom_id)
-        ale.loadROM(self.rom_path)
-        self.ale = ale
-        self.actions = list(ale.getMinimalActionSet())
-        self.noop = self.actions[0]
-        self.spec = spec
-        self.i = index
-        self.rule = game.event_modes[spec.event_mode] if spec.event_mode is not None else None
-        self.ram_obs = game.ram_obs_modes[spec.ram_obs_mode] if spec.ram_obs_mode is not None else None
-        self.v = views
-        self.ram = views["ram"][index]          # true RAM, written in place
-        self.observe = OBSERVE.get(spec.frames_layout)  # the frame work done here, if any
-        if self.observe is None:  # the screens are handed over: written where the parent reads
-            self.frames = views["frames"][:, index]  # (2, 210, 160, 3), each slot contiguous
-        else:
-            self.frames = np.zeros((2,) + SCREEN, np.uint8)
-        self.prev_ram = np.zeros(128, np.uint8)
-        self.start_ram = np.zeros(128, np.uint8)
-
-    # -- episode boundaries -------------------------------------------------------------------
-
-    def reset(self) -> None:
-        ale, v, i = self.ale, self.v, self.i
-        ale.reset_game()
-        # the episode-start RAM is read right after the reset, before the no-ops (which move
-        # the game on: Boxing's enemy walks away from its start corner)
-        ale.getRAM(self.start_ram)
-        for _ in range(int(v["noops"][i])):
-            ale.act(self.noop)
-            if ale.game_over():
-                ale.reset_game()
-                ale.getRAM(self.start_ram)
-        ale.getRAM(self.prev_ram)
-        self.rule_state = self.rule.new_state() if self.rule is not None else None
-        self.carry = 0.0
-        self.episode_return = 0.0
-        self.episode_length = 0
-        rendered = 0
-        v["single_frame"][i] = 1
-        if self.spec.want_screens:
-            ale.getScreenRGB(self.frames[0])
-            self.frames[1] = self.frames[0]
-            for slot, bit in enumerate(RESET_RENDER_BITS):
-                if v["ram_render"][i] & bit and self.render_ram_obs(slot):
-                    rendered |= 1 << slot
-            self.publish()
-        ale.getRAM(self.ram)
-        v["ram_rendered"][i] = rendered
-        v["lives"][i] = ale.lives()
-
-    def start_episode(self, batch_seed: int | None = None) -> None:
-        """A reset the parent asked for (not an autoreset): it reports no step's outcome, so
-        the previous step's reward, ends, events and episode totals do not carry over.  With
-        ``batch_seed``, the emulator first starts afresh as env ``i`` of a batch of that seed
-        (ALE applies its seed when it loads the ROM: a reload is a new emulator)."""
-        if batch_seed is not None:
-            self.ale.setInt("random_seed", emulator_seed(batch_seed, self.i))
-            self.ale.loadROM(self.rom_path)
-        for name in ("reward", "terminated", "truncated", "event_fired", "episode_return",
-                     "episode_length", "frames_played"):
-            self.v[name][self.i] = 0
-        self.reset()
-
-    # -- snapshots --------------------------------------------------------------------------
-
-    def snapshot(self) -> dict:
-        """This emulator's whole state (ALE with its RNG, and the STORI bookkeeping), picklable."""
-        return dict(ale=pickle.dumps(self.ale.cloneState(include_rng=True)),
-                    prev_ram=self.prev_ram.copy(), start_ram=self.start_ram.copy(),
-                    rule_state=copy.deepcopy(self.rule_state), carry=self.carry,
-                    episode_return=self.episode_return, episode_length=self.episode_length,
-                    max_episode_frames=self.spec.max_episode_frames)  # an ALE setting, not state
-
-    def restore(self, snap: dict) -> None:
-        self.ale.restoreState(pickle.loads(snap["ale"]))
-        self.prev_ram[:] = snap["prev_ram"]
-        self.start_ram[:] = snap["start_ram"]
-        self.rule_state = copy.deepcopy(snap["rule_state"])
-        self.carry = snap["carry"]
-        self.episode_return = snap["episode_return"]
-        self.episode_length = snap["episode_length"]
-        self.ale.getRAM(self.ram)
-
-    def publish(self, final: bool = False) -> None:
-        """Hand the step's screens over as ``frames_layout`` says (into ``final_frames``: an
-        ended episode's, before the autoreset overwrites them)."""
-        layout = self.spec.frames_layout
-        if self.observe is not None:
-            self.observe(self.frames, self.v["final_frames" if final else "frames"][self.i])
-            return
-        if layout == "pooled":
-            np.maximum(self.frames[0], self.frames[1], out=self.frames[0])
-        if final:
-            self.v["final_frames"][:, self.i] = self.frames
-
-    def render_ram_obs(self, slot: int, event_active: bool = False) -> bool:
-        """Screen ``slot`` <- the next frame under NOOP of a RAM-modified copy of the game.
-        False where nothing was rendered: the mode's condition does not hold, or the episode
-        has ended (ALE emulates no frame past an episode's end, so the screen stays true).
-        ``event_active``: an event is on, so the next frame, like every true one, first gets
-        its rule's standing writes (Boxing's colour flip, which the game undoes every frame),
-        then the mode's own."""
-        ale = self.ale
-        if ale.game_over():  # a game over or the frame cap
-            return False
-        ale.getRAM(self.ram)
-        writes = self.ram_obs.writes(self.ram)
-        if writes is None:
-            return False
-        standing = {}
-        if event_active and self.rule is not None and self.rule.pre_frame is not None:
-            # decide=False: re-apply the standing effect only, no draw (EventRule's contract)
-            standing, _ = self.rule.pre_frame(self.start_ram, dict(self.rule_state), 1.0,
-                                              self.spec.event_prob, False)
-        state = ale.cloneState()
-        for address, value in {**standing, **writes}.items():
-            ale.setRAM(address, value)
-        ale.act(self.noop)
-        ale.getScreenRGB(self.frames[slot])
-        ale.restoreState(state)
-        return True
-
-    # -- one agent step -----------------------------------------------------------------------
-
-    def step(self) -> None:
-        ale, v, i, spec = self.ale, self.v, self.i, self.spec
-        if v["reset_first"][i]:
-            self.start_episode()
-            return
-        skip, per_frame = spec.frame_skip, spec.per_frame
-        executed = v["executed"][i]
-        u = v["event_u"][i]
-        rule = self.rule
-        active = bool(v["event_active"][i]) and rule is not None
-        render_bits = int(v["ram_render"][i])
-        total = interval = 0.0
-        fired = rendered = 0
-        terminated = truncated = False
-        for f in range(skip):
-            draw = f if per_frame else 0
-            if active and rule.pre_frame is not None:
-                writes, hit = rule.pre_frame(self.start_ram, self.rule_state, float(u[draw, 0]),
-                                             spec.event_prob, per_frame or f == 0)
-                for address, value in writes.items():
-                    ale.setRAM(address, value)
-                fired += hit
-            interval += ale.act(self.actions[executed[f]]) + self.carry
-            self.carry = 0.0
-            terminated = ale.game_over(with_truncation=False)
-            truncated = ale.game_truncated()
-            done = terminated or truncated
-            if per_frame or f == skip - 1 or done:
-                if rule is not None and rule.post_frame is not None:
-                    ale.getRAM(self.ram)
-                    if active:
-                        out = rule.post_frame(self.prev_ram, self.ram, self.start_ram,
-                                              self.rule_state, float(u[draw, 0]),
-                                              float(u[draw, 1]), spec.event_prob,
-                                              ale.getEpisodeFrameNumber())
-                        for address, value in out.writes.items():
-                            ale.setRAM(address, value)
-                            self.ram[address] = value
-                        if out.zero_reward:
-                            if out.cancel_next_reward:
-                                self.carry = interval
-                            interval = 0.0
-                        fired += out.fired
-                    self.prev_ram[:] = self.ram
-                total += interval
-                interval = 0.0
-            ends_early = done and f < skip - 1  # observed (after an autoreset: as final_*)
-            if spec.want_screens and (f >= skip - 2 or ends_early):
-                # slot 1: the step's last frame (the episode's last, where it ends early)
-                slot = 1 if f == skip - 1 or ends_early else 0
-                ale.getScreenRGB(self.frames[slot])
-                if render_bits & STEP_RENDER_BITS[slot] and self.render_ram_obs(slot, active):
-                    rendered |= 1 << slot
-            if done:
-                break
-        # one emulator frame makes the observation (both slots): frame_skip 1, or an episode
-        # that ended before the step's last frame (the screens before it are not this step's)
-        single = skip == 1 or ends_early
-        if spec.want_screens and single:
-            self.frames[0] = self.frames[1]
-        v["single_frame"][i] = single
-        v["frames_played"][i] = f + 1
-        self.episode_return += total
-        self.episode_length += 1
-        v["reward"][i] = total
-        v["terminated"][i] = terminated
-        v["truncated"][i] = truncated
-        v["event_fired"][i] = fired
-        done = terminated or truncated
-        v["episode_return"][i] = self.episode_return if done else 0.0
-        v["episode_length"][i] = self.episode_length if done else 0
-        if done and spec.autoreset:
-            # the ended episode's last observation, then the next episode's first one
-            if spec.want_screens:
-                self.publish(final=True)
-            v["final_single_frame"][i] = single
-            ale.getRAM(v["final_ram"][i])
-            self.reset()
-        else:
-            if spec.want_screens:
-                self.publish()
-            v["ram_rendered"][i] = rendered
-            ale.getRAM(self.ram)
-            v["lives"][i] = ale.lives()
-
-
-def make_emulators(spec: WorkerSpec, views: dict) -> list[list[Emulator]]:
-    """The emulators of ``spec``, a list per chunk."""
-    from stori_jax.games import get_game
-
-    game = get_game(spec.game)
-    seeds = iter(spec.seeds)
-    return [[Emulator(spec, game, next(seeds), i, views) for i in chunk]
-            for chunk in spec.chunks]
 
 
 def _exit_with_parent(parent_pid: int, interval: float = 0.5) -> None:
@@ -314,15 +42,14 @@ def _exit_with_parent(parent_pid: int, interval: float = 0.5) -> None:
     threading.Thread(target=watch, daemon=True, name="stori-jax-parent-watch").start()
 
 
-def worker_main(spec: WorkerSpec, buffers, conn, parent_pid: int) -> None:
+def worker_main(spec: EmulatorSpec, buffers, conn, parent_pid: int) -> None:
     """Entry point of a worker process."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
     if os.getppid() != parent_pid:
         return
     _exit_with_parent(parent_pid)
     try:
-        chunks = make_emulators(spec, buffers.views())
-        emulators = [emulator for chunk in chunks for emulator in chunk]  # in batch order
+        emulators = make_emulators(spec, buffers.views())
         conn.send_bytes(b"K")
     except BaseException:
         conn.send_bytes(b"E" + traceback.format_exc().encode())
@@ -334,8 +61,8 @@ def worker_main(spec: WorkerSpec, buffers, conn, parent_pid: int) -> None:
             return
         try:
             reply = b"K"
-            if command[:1] == b"S":
-                for emulator in chunks[int(command[1:])]:
+            if command == b"S":
+                for emulator in emulators:
                     emulator.step()
             elif command[:1] == b"R":
                 for emulator in emulators:
