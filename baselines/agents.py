@@ -13,6 +13,8 @@ from typing import Callable
 # name -> the module that defines its AGENT (imported on first use: the commands start fast)
 AGENT_MODULES = {"ppo": "baselines.ppo", "drq": "baselines.drq"}
 RANDOM = "random"  # the uniformly random policy: evaluated, never trained
+# what the agents import beyond the library: pyproject.toml's "agents" extra
+AGENT_PACKAGES = ("flax", "optax", "flashbax", "matplotlib")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,7 +62,15 @@ def get_agent(name: str) -> Agent:
         ValueError: no such agent (the message lists them)."""
     if name not in AGENT_MODULES:
         raise ValueError(f"unknown agent {name!r}; one of {agent_names()}")
-    return importlib.import_module(AGENT_MODULES[name]).AGENT
+    try:
+        return importlib.import_module(AGENT_MODULES[name]).AGENT
+    except ModuleNotFoundError as error:
+        missing = (error.name or "").split(".")[0]
+        if missing not in AGENT_PACKAGES:
+            raise
+        raise ValueError(f"agent {name!r} needs {missing}, which is not installed: the agents "
+                         "are an extra, pip install 'stori-jax[agents]' (or, in a checkout, "
+                         "pip install -e '.[agents]')") from None
 
 
 def load_checkpoint(path: Path) -> tuple[Agent, dict]:

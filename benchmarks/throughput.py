@@ -679,6 +679,9 @@ def main(argv=None):
     if args.sizes is None:
         args.sizes = SWEEP_SIZES[args.quick]
     jobs = plan_measurements(args)
+    if importlib.util.find_spec("matplotlib") is None:
+        parser.error("matplotlib is not installed, and this run draws its plots with it: "
+                     "pip install -e '.[agents]' (the test set-up's install has it)")
     if needs_envpool(jobs) and importlib.util.find_spec("envpool") is None:
         parser.error("envpool is not installed, and this run compares against it (raw envpool "
                      "and stori-jax's envpool backend): pip install -e '.[envpool]'")

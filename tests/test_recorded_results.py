@@ -267,7 +267,8 @@ def test_the_breakout_sweep_the_benchmarks_readme_shows_is_the_recorded_one():
 
 @pytest.mark.parametrize("stem", ["2026-11-22-vm", "2026-11-24-vm-3.1-2.2",
                                   "2026-11-29-vm-chunks2-no-naive",
-                                  "2026-11-29-vm-before-Breakout-3.1-no-naive"])
+                                  "2026-11-29-vm-before-Breakout-3.1-no-naive",
+                                  "2026-12-02-vm-quick-no-naive"])
 def test_a_committed_throughput_table_is_its_json(stem):
     """The .md beside a throughput run's JSON shows its numbers, row for row (the older file
     has fewer columns: each column it has is checked)."""
