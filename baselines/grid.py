@@ -88,7 +88,7 @@ def grid_spec(agent: str, *, games=None, presets=None, seeds=DEFAULT_SEEDS, step
     """The :class:`GridSpec` of the command's flags, checked (a ValueError naming the flag)."""
     from stori_jax.checks import MAX_INT32, MAX_SEED, check_int
     from stori_jax.cli import selected_presets
-    from stori_jax.env import MAX_EPISODE_FRAMES
+    from stori_jax.builder import MAX_EPISODE_FRAMES
 
     trainable = agent_names()
     if agent != RANDOM and agent not in trainable:

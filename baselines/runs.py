@@ -239,7 +239,7 @@ def worker_split(num_envs: int) -> dict:
     ``STORI_JAX_CORES`` caps the cores, and then make's default rule on that many."""
     if not os.environ.get(CORES_VARIABLE):
         return {}
-    from stori_jax.env import default_split
+    from stori_jax.builder import default_split
 
     workers, inline = default_split(num_envs, cores())
     return dict(num_workers=workers, inline_envs=inline)

@@ -270,7 +270,7 @@ def stori(game, preset, batch, seconds, obs, backend):
 
 def envpool_supports(game, preset):
     import stori_jax
-    from envpool_bridge import unsupported_reasons
+    from stori_jax.backends.envpool import unsupported_reasons
     from stori_jax.plan import compile_plan
 
     cfg = stori_jax.preset(game, preset).replace(granularity="step")

@@ -179,8 +179,7 @@ def _observation_kind(settings: dict, ram_observation: bool) -> tuple[str, int]:
 def _stori_make_kwargs(game: str, preset: str | None, settings: dict) -> tuple[dict, str, int]:
     """stori_jax.make's keywords for envpool's ``settings`` (validated); the obs and stack."""
     from stori_jax.checks import MAX_INT32, MAX_SEED, check_int, check_probability
-    from stori_jax.env import resolve_config
-    from stori_jax.gym_adapter import sticky_actions_config
+    from stori_jax.builder import resolve_config, sticky_actions_config
 
     num_envs = check_int("num_envs", settings["num_envs"], 1)
     batch = check_int("batch_size", settings["batch_size"], 0)

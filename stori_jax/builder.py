@@ -101,6 +101,31 @@ def resolve_config(game: str, preset: str | None, config: Config | None) -> Conf
     return config
 
 
+def sticky_actions_config(game: str, preset: str | None, config, prob: float,
+                          granularity: str | None = None):
+    """The Config of ``preset`` (or ``config``) with ALE's sticky actions at ``prob``
+    (ale-py's and envpool's ``repeat_action_probability``): STORI's type 1
+    ``ActionNoise(prob, sticky=True)`` at ``frame`` granularity, which repeats the previous
+    executed action on each emulator frame with probability ``prob`` (NOOP after a reset), as
+    ALE does.  A config that already corrupts actions, or draws per agent step, is refused:
+    two action channels, or sticky actions per step, would not be ALE's."""
+    from stori_jax.config import ActionNoise
+
+    cfg = resolve_config(game, preset, config)
+    what = (f"repeat_action_probability={prob!r} (ALE's sticky actions, STORI's type 1 "
+            "ActionNoise(p, sticky=True))")
+    noise = [part for _, part, _ in cfg.components() if isinstance(part, ActionNoise)]
+    if noise:
+        raise ValueError(f"{what}: this {'preset' if preset else 'config'} already corrupts "
+                         f"actions ({cfg.describe()}): the env's action noise is STORI's type 1; "
+                         "leave repeat_action_probability 0, or pass a Config with the action "
+                         "noise you want")
+    if (granularity or cfg.granularity) != "frame":
+        raise ValueError(f"{what}: ALE repeats actions per emulator frame, and this env draws "
+                         "per agent step (granularity 'step'); use granularity 'frame'")
+    return cfg.replace(action_noise=ActionNoise(prob, sticky=True))
+
+
 def settle_config(spec, cfg: Config, granularity: str | None) -> Config:
     """``cfg`` checked against the game (its modes, a bound game) with ``granularity``'s
     override applied (it covers a drift's concept 2 too)."""
@@ -262,7 +287,7 @@ def build_envpool(plan: Plan, seed: int, max_episode_frames: int, *, num_workers
         if value is not None:
             raise ValueError(f"{name} applies to backend='subproc' only (envpool runs its "
                              f"own threads); leave it None, got {value!r}")
-    from envpool_bridge import FRAMES_LAYOUT, make_envpool_backend
+    from stori_jax.backends.envpool import FRAMES_LAYOUT, make_envpool_backend
 
     plan = dataclasses.replace(plan, frames_layout=FRAMES_LAYOUT)
     return plan, make_envpool_backend(plan, seed, max_episode_frames)

@@ -594,16 +594,3 @@ def _differences(snapshot_plan, plan: Plan) -> list[str]:
     return [f"{f.name} {getattr(snapshot_plan, f.name)!r} there, {getattr(plan, f.name)!r} here"
             for f in dataclasses.fields(Plan)
             if getattr(snapshot_plan, f.name) != getattr(plan, f.name)]
-
-
-# make() and its steps live in builder.py; the names below were importable from here first
-_MOVED = ("make", "FRAME_SKIP", "MAX_EPISODE_FRAMES", "BACKENDS", "check_memory",
-          "emulator_seeds", "resolve_config", "default_split")
-
-
-def __getattr__(name):
-    if name in _MOVED:
-        from stori_jax import builder
-
-        return getattr(builder, name)
-    raise AttributeError(f"module 'stori_jax.env' has no attribute {name!r}")

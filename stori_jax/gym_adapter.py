@@ -102,32 +102,6 @@ def action_meanings(game: str) -> tuple[str, ...]:
     return tuple(names[a] for a in ale.getMinimalActionSet())
 
 
-def sticky_actions_config(game: str, preset: str | None, config, prob: float,
-                          granularity: str | None = None):
-    """The Config of ``preset`` (or ``config``) with ALE's sticky actions at ``prob``
-    (ale-py's and envpool's ``repeat_action_probability``): STORI's type 1
-    ``ActionNoise(prob, sticky=True)`` at ``frame`` granularity, which repeats the previous
-    executed action on each emulator frame with probability ``prob`` (NOOP after a reset), as
-    ALE does.  A config that already corrupts actions, or draws per agent step, is refused:
-    two action channels, or sticky actions per step, would not be ALE's."""
-    import stori_jax
-    from stori_jax.env import resolve_config
-
-    cfg = resolve_config(game, preset, config)
-    what = (f"repeat_action_probability={prob!r} (ALE's sticky actions, STORI's type 1 "
-            "ActionNoise(p, sticky=True))")
-    noise = [part for _, part, _ in cfg.components() if isinstance(part, stori_jax.ActionNoise)]
-    if noise:
-        raise ValueError(f"{what}: this {'preset' if preset else 'config'} already corrupts "
-                         f"actions ({cfg.describe()}): the env's action noise is STORI's type 1; "
-                         "leave repeat_action_probability 0, or pass a Config with the action "
-                         "noise you want")
-    if (granularity or cfg.granularity) != "frame":
-        raise ValueError(f"{what}: ALE repeats actions per emulator frame, and this env draws "
-                         "per agent step (granularity 'step'); use granularity 'frame'")
-    return cfg.replace(action_noise=stori_jax.ActionNoise(prob, sticky=True))
-
-
 def take_ale_keywords(kwargs: dict, ale_style: bool, id_name: str | None = None) -> dict:
     """Replace ale-py's ``AtariEnv`` keywords in ``kwargs`` (make's keywords) by make's own, in
     place; returns what the adapter does itself: ``obs_type`` (None: make's ``obs``),
@@ -283,6 +257,8 @@ class _Owner:
         self._obs_type = ale["obs_type"]
         self.render_mode = ale["render_mode"]
         if ale["repeat_action_probability"] > 0:
+            from stori_jax.builder import sticky_actions_config
+
             make_kwargs["config"] = sticky_actions_config(
                 game, preset, make_kwargs.get("config"), ale["repeat_action_probability"],
                 make_kwargs.get("granularity"))

@@ -299,7 +299,7 @@ def planned(throughput, **overrides):
 def test_a_full_run_measures_every_preset_and_the_breakout_sweep(monkeypatch):
     throughput = script(monkeypatch, "throughput")
     keys = planned(throughput)
-    from envpool_bridge import unsupported_reasons  # noqa: F401 - envpool_supports uses it
+    from stori_jax.backends.envpool import unsupported_reasons  # noqa: F401 - envpool_supports uses it
 
     for b in (8, 32, 64):
         assert ("emulator limit", "Breakout", "-", b, "-", "raw") in keys

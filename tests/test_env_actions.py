@@ -10,7 +10,7 @@ import pytest
 
 import stori_jax
 from stori_jax import ActionNoise, Config
-from stori_jax.env import emulator_seeds
+from stori_jax.builder import emulator_seeds
 
 from _env_support import binomial_ok, make, new_ale, random_actions, run_env, to_numpy
 

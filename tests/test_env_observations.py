@@ -15,7 +15,7 @@ import pytest
 
 import stori_jax
 from stori_jax import Config, ObservationMask, get_game
-from stori_jax.env import emulator_seeds
+from stori_jax.builder import emulator_seeds
 from stori_jax.plan import compile_plan
 
 from _env_support import (binomial_ok, breakout_tracker, last_ram, lockstep_with_twin, make,

@@ -237,7 +237,7 @@ def test_a_game_envpool_lacks_is_named(monkeypatch):
 def test_an_envpool_without_the_ram_in_its_info_is_named(monkeypatch):
     import tomllib
 
-    from envpool_bridge import MIN_ENVPOOL_MAJOR
+    from stori_jax.backends.envpool import MIN_ENVPOOL_MAJOR
 
     root = Path(__file__).resolve().parent.parent
     project = tomllib.loads((root / "pyproject.toml").read_text())["project"]
@@ -268,7 +268,7 @@ def test_consecutive_seeds_share_no_emulator_stream():
 def test_every_seed_has_its_own_envpool_base():
     """envpool_seed hashes the whole seed: 1000 seeds give 1000 bases, each in envpool's range
     and the same on every call (a base from part of the seed, or none of it, repeats)."""
-    from envpool_bridge import MAX_BASE_SEED, envpool_seed
+    from stori_jax.backends.envpool import MAX_BASE_SEED, envpool_seed
 
     bases = [envpool_seed(s) for s in range(1000)]
     assert len(set(bases)) == 1000
@@ -309,7 +309,7 @@ def test_the_pool_gets_the_options_the_bridge_documents():
     """Every option a make() argument maps to, as envpool sees it: the frame skip, no-op starts
     plus one, the hashed seed, the step cap rounded up, and no Atari preprocessing of envpool's
     own (episodic life, reward clipping, fire reset, sticky actions, the full action set)."""
-    from envpool_bridge import envpool_seed
+    from stori_jax.backends.envpool import envpool_seed
 
     with stori_jax.make("Breakout", "3.1", num_envs=2, seed=3, frame_skip=2, noop_max=5,
                         max_episode_frames=1001, **EP) as env:

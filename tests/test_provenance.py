@@ -25,7 +25,7 @@ def test_software_names_the_packages_and_the_code():
 
 # every kind of tracked file: code (stori_jax, envpool_bridge, baselines, benchmarks,
 # pyproject.toml), whose change makes the commit '+dirty', and results and docs, which do not
-CODE_FILES = ("stori_jax/core.py", "envpool_bridge/__init__.py", "baselines/ppo.py",
+CODE_FILES = ("stori_jax/core.py", "stori_jax/backends/envpool.py", "baselines/ppo.py",
               "benchmarks/throughput.py", "pyproject.toml")
 NOT_CODE_FILES = ("baselines/results/table.json", "benchmarks/results/run.json", "README.md",
                   "baselines/README.md", "stori_jax/notes.md")
