@@ -21,7 +21,6 @@ DREAMER64 = 64
 # how a backend hands over its frames (see stori_jax.functional.preprocess.pool_screens):
 # the two last screens, the max-pooled screen (HWC or CHW), or the observation itself
 SCREEN_LAYOUTS = ("pair", "pooled", "pooled_chw")
-OBSERVATION_LAYOUTS = ("atari84", "dreamer64")  # preprocessed where the frames were made
 
 
 @functools.lru_cache(maxsize=None)
@@ -94,5 +93,7 @@ def dreamer64(screens: np.ndarray, out: np.ndarray) -> None:
     out[...] = _area_resize(pooled, DREAMER64, DREAMER64)
 
 
+# the observations made where the frames are made: the function, its shape per env
 OBSERVE = {"atari84": atari84, "dreamer64": dreamer64}
 OBSERVATION_SHAPES = {"atari84": (ATARI84, ATARI84), "dreamer64": (DREAMER64, DREAMER64, 3)}
+OBSERVATION_LAYOUTS = tuple(OBSERVE)
