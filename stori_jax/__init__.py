@@ -14,6 +14,7 @@ from stori_jax.config import (ActionNoise, Config, ConceptDrift, ObservationMask
                               RandomEvent)
 from stori_jax.games import STORI_GAMES, get_game  # noqa: F401
 from stori_jax.presets import describe_preset, list_presets, preset  # noqa: F401
+from stori_jax.reference_format import config_from_reference  # noqa: F401
 
 __version__ = "0.1.0"
 
@@ -36,6 +37,7 @@ _LAZY = {
 
 __all__ = ["ActionNoise", "Config", "ConceptDrift", "ObservationMask", "RandomEvent",
            "STORI_GAMES", "get_game", "describe_preset", "list_presets", "preset",
+           "config_from_reference",
            *_LAZY]
 
 

@@ -200,7 +200,7 @@ def _config_for(args):
     if not isinstance(reference, dict):
         raise ValueError(f"--config {path} must hold a JSON object (a reference-format "
                          f"config), got {type(reference).__name__}")
-    return path.stem, stori_jax.Config.from_reference(reference, game=args.game)
+    return path.stem, stori_jax.config_from_reference(reference, game=args.game)
 
 
 class _RepeatedKey(Exception):

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 from .checks import (MAX_INT32, check_action_indices, check_bool, check_int,
                      check_draw_probability, shown)
@@ -269,15 +269,6 @@ class Config:
         if self.ram_observation:
             bits.append("RAM observation")
         return f"type {self.type}" + (" (" + "; ".join(bits) + ")" if bits else " (default)")
-
-    # -- the reference's configuration format ---------------------------------------------------
-
-    @classmethod
-    def from_reference(cls, d: Mapping[str, Any], game: str | None = None) -> "Config":
-        """Load the reference STORI configuration format (nested dict or flat dotted keys)."""
-        from stori_jax.reference_format import config_from_reference
-
-        return config_from_reference(d, game=game)
 
 
 def _describe_part(part) -> str:

@@ -330,6 +330,6 @@ def test_show_and_record_play_the_asked_config_into_a_file_named_after_it(tmp_pa
     assert written == [
         ("Breakout", "3.2A", stori_jax.preset("Breakout", "3.2A"), Path("Breakout-3.2A.png")),
         ("Boxing", "3.1", stori_jax.Config(), Path("Boxing-3.1.gif")),
-        ("Gopher", "mine", stori_jax.Config.from_reference(reference, game="Gopher"),
+        ("Gopher", "mine", stori_jax.config_from_reference(reference, game="Gopher"),
          Path("Gopher-mine.png"))]
     assert written[2][2].action_noise.prob == 0.45
