@@ -2,20 +2,22 @@
 
 ``before_step`` draws everything random (executed actions, event uniforms, mask and RAM-obs
 decisions, concept, reset no-ops); ``after_step`` masks and preprocesses the screens and updates
-the env state.  Both are pure functions of (state, inputs) with a static :class:`Plan`.
+the env state.  Both are pure functions of (plan, state, inputs); a :class:`Plan`'s structure
+is static, its numbers traced (see stori_jax.plan).
 """
 
 from __future__ import annotations
 
+import collections
 import functools
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from stori_jax import functional as F
-from stori_jax.backends.layout import RESET_RENDER_BITS, STEP_RENDER_BITS
+from stori_jax.backends.layout import (FINAL_OUTPUTS, RESET_RENDER_BITS, STEP_OUTPUTS,
+                                      STEP_RENDER_BITS)
 from stori_jax.checks import MAX_SEED, check_int, unless_traced
 from stori_jax.functional.preprocess import (ATARI84, STACK, pack_stack, push_packed,
                                              unpack_stack)
@@ -77,7 +79,7 @@ def _component_active(under_drift: bool, concept: jax.Array) -> jax.Array:
     return concept == 1 if under_drift else jnp.ones(concept.shape, bool)
 
 
-@functools.partial(jax.jit, static_argnames=("plan", "resetting"))
+@functools.partial(jax.jit, static_argnames=("resetting",))
 def before_step(plan: Plan, state: EnvState, actions: jax.Array, resetting: bool = False):
     """(new state, Draws) for one agent step (or, with ``resetting``, for a reset of all envs)."""
     b, skip = plan.num_envs, plan.frame_skip
@@ -145,33 +147,12 @@ def before_step(plan: Plan, state: EnvState, actions: jax.Array, resetting: bool
     return new_state, draws
 
 
-class WorkerOutputs(NamedTuple):
-    """What the backend returned for one step (numpy views; copied out by ``after_step``)."""
-
-    frames: object        # see Plan.frames_layout
-    ram: object           # (B, 128) uint8
-    ram_rendered: object  # (B,) uint8
-    single_frame: object  # (B,) uint8: both screens are one emulator frame (a reset, frame
-    #                       skip 1, or an episode that ended before the step's last frame)
-    frames_played: object  # (B,) int32: emulator frames the step played (0: reset instead)
-    reward: object        # (B,) float32
-    terminated: object    # (B,) uint8
-    truncated: object     # (B,) uint8
-    lives: object         # (B,) int32
-    event_fired: object   # (B,) int32
-    episode_return: object
-    episode_length: object
-    # an autoresetting env's step where an episode ended (None where none did: the same step
-    # compiled without them): what frames, single_frame and ram held before the autoreset
-    final_frames: object = None
-    final_single_frame: object = None
-    final_ram: object = None
-
-
-# the outputs every backend hands over on every step
-STEP_OUTPUTS = tuple(name for name in WorkerOutputs._fields if not name.startswith("final_"))
-FINAL_OUTPUTS = tuple(name for name in WorkerOutputs._fields if name.startswith("final_"))
-FRAME_OUTPUTS = ("frames", "final_frames")  # screens: none where the observation is the RAM
+# What the backend returned for one step (numpy views; copied out by ``after_step``): the
+# emulators' outputs of backends.layout.STEP_BUFFERS.  The final_* ones (an autoresetting
+# env's step where an episode ended: what frames, single_frame and ram held before the
+# autoreset) are None where no episode ended (the same step compiled without them).
+WorkerOutputs = collections.namedtuple("WorkerOutputs", STEP_OUTPUTS + FINAL_OUTPUTS,
+                                       defaults=(None,) * len(FINAL_OUTPUTS))
 
 
 def observe(plan: Plan, game, draws: Draws, frames, ram, ram_rendered, single_frame,
@@ -240,7 +221,7 @@ def ended(out: WorkerOutputs):
     return (out.terminated != 0) | (out.truncated != 0)
 
 
-@functools.partial(jax.jit, static_argnames=("plan",))
+@jax.jit
 def after_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, new_episode,
                reset_step):
     """(new state, obs, reward, terminated, truncated, info) from the workers' outputs, in one

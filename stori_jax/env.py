@@ -28,7 +28,8 @@ from stori_jax.backends.protocol import Backend
 from stori_jax.backends.subproc import MAX_TIMEOUT_S
 from stori_jax.checks import MAX_SEED, check_actions, check_int, check_real, shown
 from stori_jax.config import Config
-from stori_jax.core import (FINAL_OUTPUTS, FRAME_OUTPUTS, STEP_OUTPUTS, Draws, EnvState,
+from stori_jax.backends.layout import FINAL_OUTPUTS, FRAME_OUTPUTS, STEP_OUTPUTS
+from stori_jax.core import (Draws, EnvState,
                             WorkerOutputs, before_step, ended, finish_step, initial_state)
 from stori_jax.errors import (ConcurrentUseError, EnvClosedError, EnvStateError,
                               InterruptedStepError, WorkersLateError)
@@ -82,10 +83,11 @@ NOT_COPIED = ("a stori_jax.Env owns its emulator worker processes and cannot be 
 
 
 def jit_key(plan: Plan) -> Plan:
-    """``plan`` without the facts only the workers use (event mode and probability, RAM-obs
-    mode), so configs that differ only there share one compilation of the JAX side."""
+    """``plan`` without the structure only the workers use (event and RAM-obs modes), so
+    configs that differ only there share one compilation of the JAX side (numbers are traced:
+    see stori_jax.plan)."""
     if plan.event is not None:
-        plan = dataclasses.replace(plan, event=dataclasses.replace(plan.event, mode=0, prob=0.0))
+        plan = dataclasses.replace(plan, event=dataclasses.replace(plan.event, mode=0))
     if plan.mask is not None and plan.mask.kind == "ram":
         plan = dataclasses.replace(plan, mask=dataclasses.replace(plan.mask, mode=0))
     return plan

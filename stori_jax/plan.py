@@ -1,10 +1,15 @@
-"""A Config compiled against a game and the env's settings into the static facts the jitted
-functions and the workers need (hashable, so it can be a static argument of ``jax.jit``)."""
+"""A Config compiled against a game and the env's settings into the facts the jitted functions
+and the workers need.
+
+A :class:`Plan` is a pytree: its structure (game, batch, observation, which components, their
+kinds and modes) is static, its numbers (probabilities, the drift period) are leaves, traced
+by ``jax.jit``.  Configs that differ only in numbers share every compilation."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
+import jax
 import numpy as np
 
 from stori_jax.config import ActionNoise, Config, ObservationMask, RandomEvent
@@ -13,6 +18,17 @@ from stori_jax.games.base import GameSpec
 OBS_KINDS = ("raw", "atari84", "dreamer64", "ram")
 
 
+def numbers_traced(*numbers: str):
+    """Register a frozen dataclass as a pytree whose fields ``numbers`` (and nested plans) are
+    leaves and whose other fields are static structure."""
+    def register(cls):
+        data = [f.name for f in fields(cls) if f.name in numbers]
+        meta = [f.name for f in fields(cls) if f.name not in numbers]
+        return jax.tree_util.register_dataclass(cls, data_fields=data, meta_fields=meta)
+    return register
+
+
+@numbers_traced("prob")
 @dataclass(frozen=True)
 class NoisePlan:
     prob: float
@@ -21,6 +37,7 @@ class NoisePlan:
     under_drift: bool
 
 
+@numbers_traced("prob")
 @dataclass(frozen=True)
 class EventPlan:
     mode: int
@@ -28,6 +45,7 @@ class EventPlan:
     under_drift: bool
 
 
+@numbers_traced("prob")
 @dataclass(frozen=True)
 class MaskPlan:
     kind: str  # crop | blackout | ram
@@ -42,6 +60,7 @@ class MaskPlan:
         return is_torch(self.kind, self.mode)
 
 
+@numbers_traced("noise", "event", "mask", "drift_period")
 @dataclass(frozen=True)
 class Plan:
     game: str

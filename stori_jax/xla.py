@@ -24,11 +24,10 @@ import jax.numpy as jnp
 import numpy as np
 from jax.experimental import io_callback
 
-from stori_jax.backends.layout import SCREEN, buffer_specs
+from stori_jax.backends.layout import FRAME_OUTPUTS, buffer_specs
 from stori_jax.checks import check_actions
-from stori_jax.core import (FRAME_OUTPUTS, EnvState, WorkerOutputs, before_step, finish_step,
+from stori_jax.core import (EnvState, WorkerOutputs, before_step, finish_step,
                             initial_state)
-from stori_jax.functional.preprocess import frames_shape
 
 
 class XlaHandle(NamedTuple):
@@ -51,13 +50,10 @@ def new_epoch() -> int:
 def output_shapes(plan) -> WorkerOutputs:
     """What one step's callback returns; no screens where the observation is the RAM.  An
     autoresetting env's always holds the final_* outputs (a compiled step has one shape)."""
-    b = plan.num_envs
-    # the workers' output buffers
-    shapes = buffer_specs(b, plan.frame_skip, final=plan.autoreset)
-    frames = frames_shape(plan.frames_layout, b, SCREEN) if plan.obs != "ram" else (0,)
-    for name in FRAME_OUTPUTS:
-        if name in shapes:
-            shapes[name] = (frames, np.uint8)  # as the backend hands them over
+    shapes = buffer_specs(plan.num_envs, plan.frame_skip, final=plan.autoreset,
+                          frames_layout=plan.frames_layout)
+    if plan.obs == "ram":
+        shapes.update({name: ((0,), np.uint8) for name in FRAME_OUTPUTS if name in shapes})
     return WorkerOutputs(**{name: jax.ShapeDtypeStruct(*shapes[name])
                             for name in WorkerOutputs._fields if name in shapes})
 

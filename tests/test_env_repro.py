@@ -251,3 +251,34 @@ def test_the_purposes_streams_are_distinct_keys():
         for b in F.Purpose:
             if a < b:
                 assert not (data[a] == data[b]).all(axis=-1).any(), (a, b)
+
+
+def test_configs_differing_only_in_numbers_share_every_compilation():
+    """A Config's numbers (probabilities, the drift period) are traced, not static: a sweep
+    over ``prob`` or ``period`` compiles nothing after its first config, and the numbers still
+    take effect (0 and 1 corrupt no action and every action)."""
+    from stori_jax import core
+    from stori_jax.config import ActionNoise, ConceptDrift, Config, ObservationMask
+
+    def config(prob, period):
+        return Config(drift=ConceptDrift("gradual", period, Config(action_noise=ActionNoise(prob))),
+                      observation=ObservationMask("crop", 5, prob))
+
+    def compiled():
+        return (core.before_step._cache_size(), core.after_step._cache_size(),
+                core.push_frames._cache_size())
+
+    corrupted = []
+    for i, (prob, period) in enumerate([(0.0, 1), (1.0, 1), (0.25, 3)]):
+        with stori_jax.make("Breakout", config=config(prob, period), num_envs=2, seed=0,
+                            max_episode_frames=40) as env:
+            env.reset()
+            seen = 0
+            for _ in range(8):
+                seen += int(np.asarray(env.step([1, 1])[4]["action_corrupted"]).sum())
+            corrupted.append(seen)
+            if i == 0:
+                first = compiled()
+            else:
+                assert compiled() == first, f"prob {prob}, period {period} compiled again"
+    assert corrupted[0] == 0 and corrupted[1] > 0

@@ -120,9 +120,8 @@ class EnvpoolBackend:
         self.num_envs = b
         self._frame_skip = plan.frame_skip
         # the subproc backend's buffers, but one max-pooled screen per env, channels first
-        self.views = {name: np.zeros(shape, dtype)
-                      for name, (shape, dtype) in buffer_specs(b, plan.frame_skip).items()}
-        self.views["frames"] = np.zeros((b, SCREEN[2]) + SCREEN[:2], np.uint8)
+        self.views = {name: np.zeros(shape, dtype) for name, (shape, dtype) in
+                      buffer_specs(b, plan.frame_skip, frames_layout="pooled_chw").items()}
         self._running_return = np.zeros(b, np.float64)
         self._running_length = np.zeros(b, np.int64)
         self._pending = None  # the command the pool has and whose result is not yet taken

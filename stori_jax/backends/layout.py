@@ -1,6 +1,8 @@
 """The shared-memory buffers exchanged between the parent and the emulator workers.
 
-One place for their names, shapes and dtypes; both sides build numpy views from this table.
+One table of a step's per-env arrays (:data:`STEP_BUFFERS`: name, dtype, shape, writer): the
+shared memory, ``core.WorkerOutputs``, ``env.xla()``'s callback shapes and the envpool
+backend's outputs are all built from it.
 """
 
 from __future__ import annotations
@@ -21,48 +23,79 @@ STEP_RENDER_BITS = (1, 2)
 RESET_RENDER_BITS = (4, 8)
 
 
+@dataclass(frozen=True)
+class StepBuffer:
+    """One per-env array a step exchanges: ``shape`` per env (``"skip"`` is the frame skip,
+    ``"frames"`` the screens as ``frames_layout`` hands them over), who writes it (``"caller"``:
+    the env's draws, read by the emulating processes; ``"emulators"``: a step's output, read
+    by the JAX side), and whether only an autoresetting batch has it (``final``)."""
+
+    name: str
+    dtype: type
+    shape: tuple
+    writer: str
+    final: bool = False
+
+
+STEP_BUFFERS = (
+    # the caller's draws
+    StepBuffer("executed", np.int32, ("skip",), "caller"),     # minimal-set action per frame
+    StepBuffer("event_u", np.float32, ("skip", 2), "caller"),  # per frame: firing, choice draw
+    StepBuffer("event_active", np.uint8, (), "caller"),        # event rule on (the concept)
+    StepBuffer("ram_render", np.uint8, (), "caller"),          # RAM-obs render bits (above)
+    StepBuffer("noops", np.int32, (), "caller"),               # no-op frames after a reset
+    StepBuffer("reset_first", np.uint8, (), "caller"),         # reset instead of stepping
+    # the step's outputs
+    StepBuffer("frames", np.uint8, "frames", "emulators"),     # the last two screens (one
+    #                                                            frame in both: single_frame)
+    StepBuffer("ram", np.uint8, (RAM_SIZE,), "emulators"),
+    StepBuffer("ram_rendered", np.uint8, (), "emulators"),     # render bits applied (0..3)
+    StepBuffer("single_frame", np.uint8, (), "emulators"),     # both screens one frame (a
+    #                                                            reset, skip 1, an early end)
+    StepBuffer("frames_played", np.int32, (), "emulators"),    # 0: reset instead; < skip:
+    #                                                            the episode ended before
+    StepBuffer("reward", np.float32, (), "emulators"),
+    StepBuffer("terminated", np.uint8, (), "emulators"),
+    StepBuffer("truncated", np.uint8, (), "emulators"),
+    StepBuffer("lives", np.int32, (), "emulators"),
+    StepBuffer("event_fired", np.int32, (), "emulators"),
+    StepBuffer("episode_return", np.float32, (), "emulators"),  # where an episode ended
+    StepBuffer("episode_length", np.int32, (), "emulators"),
+    # an autoresetting batch: what frames, single_frame and ram held before the autoreset
+    StepBuffer("final_frames", np.uint8, "frames", "emulators", final=True),
+    StepBuffer("final_single_frame", np.uint8, (), "emulators", final=True),
+    StepBuffer("final_ram", np.uint8, (RAM_SIZE,), "emulators", final=True),
+)
+STEP_OUTPUTS = tuple(b.name for b in STEP_BUFFERS if b.writer == "emulators" and not b.final)
+FINAL_OUTPUTS = tuple(b.name for b in STEP_BUFFERS if b.final)
+FRAME_OUTPUTS = tuple(b.name for b in STEP_BUFFERS if b.shape == "frames")
+
+
+def frames_shape(layout: str, num_envs: int, screens: bool = True) -> tuple[int, ...]:
+    """The shape of a batch's screens handed over in ``layout`` (stori_jax.pixels): both
+    screens slot-major (``pair``), one pooled screen (``pooled``, ``pooled_chw``: channels
+    first), or an observation made by the emulating processes; without screens (a RAM
+    observation), each env's two slots of no pixels."""
+    height, width, channels = SCREEN
+    if not screens:
+        return (2, num_envs, 0, 0, channels)
+    shapes = {"pair": (2, num_envs) + SCREEN, "pooled": (num_envs,) + SCREEN,
+              "pooled_chw": (num_envs, channels, height, width),
+              **{name: (num_envs,) + shape for name, shape in OBSERVATION_SHAPES.items()}}
+    if layout not in shapes:
+        raise ValueError(f"frames layout must be one of {list(shapes)}, got {layout!r}")
+    return shapes[layout]
+
+
 def buffer_specs(num_envs: int, frame_skip: int, screens: bool = True,
                  final: bool = False, frames_layout: str = "pair"
                  ) -> dict[str, tuple[tuple[int, ...], type]]:
-    """Name -> (shape, dtype) of every buffer; without ``screens`` (a RAM observation) the
-    frame buffers hold no pixels.  ``final`` (an autoresetting batch): also the buffers of an
-    ended episode's last observation, written where a step's episode ended (the others hold
-    the next episode's first).  ``frames_layout`` (stori_jax.pixels): an observation made by
-    the emulating processes travels instead of the two screens."""
-    b = num_envs
-    if frames_layout in OBSERVATION_SHAPES and screens:
-        frames = ((b,) + OBSERVATION_SHAPES[frames_layout], np.uint8)
-    else:
-        frames = ((2, b) + (SCREEN if screens else (0, 0, SCREEN[2])), np.uint8)
-    specs = {
-        # parent -> workers
-        "executed": ((b, frame_skip), np.int32),      # minimal-set action index per frame
-        "event_u": ((b, frame_skip, 2), np.float32),   # per frame: firing draw, choice draw
-        "event_active": ((b,), np.uint8),              # event rule on (concept) for this step
-        "ram_render": ((b,), np.uint8),                # RAM-obs render bits (see above)
-        "noops": ((b,), np.int32),                     # no-op frames after a reset
-        "reset_first": ((b,), np.uint8),               # reset this env instead of stepping it
-        # workers -> parent
-        "frames": frames,                              # the last two screens, slot-major
-        #                                                (one frame in both: see single_frame)
-        "ram": ((b, RAM_SIZE), np.uint8),
-        "reward": ((b,), np.float32),
-        "terminated": ((b,), np.uint8),
-        "truncated": ((b,), np.uint8),
-        "lives": ((b,), np.int32),
-        "event_fired": ((b,), np.int32),
-        "ram_rendered": ((b,), np.uint8),              # render bits actually applied (0..3)
-        "single_frame": ((b,), np.uint8),              # both screens are one emulator frame
-        "frames_played": ((b,), np.int32),             # emulator frames the step played (0:
-        #                                                reset instead; < frame_skip: its
-        #                                                episode ended before the last frame)
-        "episode_return": ((b,), np.float32),          # final value where an episode ended
-        "episode_length": ((b,), np.int32),
-    }
-    if final:  # what frames, single_frame and ram held before the autoreset replaced them
-        specs.update(final_frames=frames, final_single_frame=((b,), np.uint8),
-                     final_ram=((b, RAM_SIZE), np.uint8))
-    return specs
+    """Name -> (shape, dtype) of every :data:`STEP_BUFFERS` entry of a batch (the final ones
+    only with ``final``, an autoresetting batch)."""
+    sizes = {"skip": frame_skip}
+    return {b.name: (frames_shape(frames_layout, num_envs, screens) if b.shape == "frames"
+                     else (num_envs,) + tuple(sizes.get(d, d) for d in b.shape), b.dtype)
+            for b in STEP_BUFFERS if final or not b.final}
 
 
 def shared_bytes(num_envs: int, frame_skip: int, screens: bool = True,

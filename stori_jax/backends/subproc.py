@@ -28,6 +28,7 @@ from stori_jax.backends.emulator import EmulatorSpec
 from stori_jax.backends.worker import reset_command, reset_seed, worker_main
 from stori_jax.errors import (EnvClosedError, InterruptedStepError, WorkerError,  # noqa: F401
                               WorkersLateError)
+from stori_jax.pixels import OBSERVATION_LAYOUTS
 
 
 # recv(timeout=...) at most: the workers' pipes are waited on in int32 milliseconds (2^31 ms is
@@ -187,8 +188,10 @@ class SubprocBackend:
         self.frames_layout = frames_layout
         self.max_episode_frames = max_episode_frames
         ctx = mp.get_context("spawn")
+        # a pooled screen is written into slot 0 of the pair (outputs() hands that slot over)
+        shared = frames_layout if frames_layout in OBSERVATION_LAYOUTS else "pair"
         self.buffers = SharedBuffers.allocate(ctx, num_envs, frame_skip, want_screens,
-                                              final=autoreset, frames_layout=frames_layout)
+                                              final=autoreset, frames_layout=shared)
         self.views = self.buffers.views()
         if num_workers and not 0 <= inline_envs < num_envs:
             raise ValueError(f"inline_envs must be in [0, num_envs - 1], got {inline_envs}")

@@ -15,7 +15,7 @@ import numpy as np
 
 from stori_jax.checks import MAX_INT32, check_dtype, check_int
 from stori_jax.pixels import (ATARI84, DREAMER64, LUMA_WEIGHTS, OBSERVATION_LAYOUTS,
-                              OBSERVATION_SHAPES, SCREEN_LAYOUTS, area_taps)
+                              SCREEN_LAYOUTS, area_taps)
 
 STACK = 4
 FRAMES_LAYOUTS = SCREEN_LAYOUTS + OBSERVATION_LAYOUTS  # how a backend hands over its frames
@@ -73,18 +73,6 @@ def area_resize(image, height: int, width: int, *, y_axis: int, x_axis: int):
     x = _resize_axis(x, y_axis, height)
     x = _resize_axis(x, x_axis, width)
     return ((x + count // 2) // count).astype(jnp.uint8)
-
-
-def frames_shape(layout: str, num_envs: int, screen: tuple[int, int, int]) -> tuple[int, ...]:
-    """The shape of the screens a backend hands over in ``layout`` (see :func:`pool_screens`)."""
-    height, width, channels = screen
-    shapes = {"pair": (2, num_envs, height, width, channels),
-              "pooled": (num_envs, height, width, channels),
-              "pooled_chw": (num_envs, channels, height, width),
-              **{name: (num_envs,) + shape for name, shape in OBSERVATION_SHAPES.items()}}
-    if layout not in shapes:
-        raise ValueError(f"frames layout must be one of {list(FRAMES_LAYOUTS)}, got {layout!r}")
-    return shapes[layout]
 
 
 def pool_screens(frames, layout: str = "pair"):
