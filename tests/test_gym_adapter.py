@@ -6,7 +6,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import stori_jax
-from stori_jax.gym_adapter import StoriGymEnv, env_id
+from stori_jax.compat.gymnasium import StoriGymEnv, env_id
 
 
 def test_every_preset_is_registered():
@@ -200,7 +200,7 @@ def test_reset_options_are_refused_not_ignored(vector):
 
 
 def test_a_config_of_ones_own_through_the_adapter_classes():
-    from stori_jax.gym_adapter import StoriGymEnv, StoriVectorEnv
+    from stori_jax.compat.gymnasium import StoriGymEnv, StoriVectorEnv
 
     env = StoriGymEnv("Breakout", config=stori_jax.Config(ram_observation=True), obs="ram",
                       num_workers=0)
@@ -718,7 +718,7 @@ def test_ale_grayscale_is_ales_own_luminance():
     import ale_py
     from ale_py import roms
 
-    from stori_jax.gym_adapter import ale_grayscale
+    from stori_jax.compat.ale import ale_grayscale
 
     ale_py.ALEInterface.setLoggerMode(ale_py.LoggerMode.Error)
     rng = np.random.default_rng(0)
@@ -806,7 +806,7 @@ def test_ale_keywords_have_ale_pys_meanings():
     sticky type 1."""
     import ale_py
 
-    from stori_jax.gym_adapter import ale_grayscale
+    from stori_jax.compat.ale import ale_grayscale
 
     gym.register_envs(ale_py)
     env = gym.make("stori_jax:stori_ALE/Breakout-3.1-v5", render_mode="rgb_array", num_workers=0,
@@ -880,7 +880,7 @@ def test_ale_keywords_it_cannot_honour_are_refused_by_name(env_id, kwargs, patte
 
 
 def test_the_ale_style_ids_are_registered_beside_the_v0_ones():
-    from stori_jax.gym_adapter import ale_env_id
+    from stori_jax.compat.ale import ale_env_id
 
     for game, name in stori_jax.list_presets():
         for frameskip in (4, 1):
