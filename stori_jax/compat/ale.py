@@ -27,6 +27,7 @@ import functools
 import numpy as np
 
 from stori_jax.checks import check_int, check_probability
+from stori_jax.games import get_game
 
 ALE_NAMESPACE = "stori_ALE"  # ale-py's style (gymnasium ids hold one namespace: no stori_jax/ALE/)
 
@@ -69,8 +70,6 @@ def action_meanings(game: str) -> tuple[str, ...]:
     """ale-py's ``get_action_meanings()`` of ``game``'s minimal action set (the actions a
     stori_jax env takes, in order)."""
     from ale_py import Action, ALEInterface, LoggerMode, roms
-
-    from stori_jax.games import get_game
 
     ALEInterface.setLoggerMode(LoggerMode.Error)
     ale = ALEInterface()
@@ -141,6 +140,10 @@ class StoriALE:
     ...), answered from the env's last ``reset()`` or ``step()``.  The emulators run in worker
     processes, so nothing here acts on them (no ``act``, ``cloneState``, ``setRAM``).
 
+    Before the first ``reset()``, ``lives()`` and ``game_over()`` answer as ale-py's do (the
+    game at power-on: Breakout's 5 lives, not over); the screen and the RAM need a ``reset()``
+    (ale-py's power-on frame is not one a STORI episode shows).
+
     The screen is the observation's: the step's last frame at ``frameskip=1``; with ``frameskip``
     k > 1, the max of the step's last two frames (STORI's raw observation), where ale-py's is the
     last frame alone.  It needs a screen observation (obs_type ``rgb`` or ``grayscale``, or
@@ -159,9 +162,13 @@ class StoriALE:
         return last
 
     def lives(self) -> int:
+        if self._owner._last is None:  # before the first reset: the game's at power-on
+            return get_game(self._owner._game_name).start_lives
         return int(self._last("lives")["lives"])
 
     def game_over(self, with_truncation: bool = True) -> bool:
+        if self._owner._last is None:  # the game at power-on is not over (ale-py's answer)
+            return False
         last = self._last("game_over")
         return bool(last["terminated"] or (with_truncation and last["truncated"]))
 
