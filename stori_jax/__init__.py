@@ -48,7 +48,7 @@ def _register_gymnasium_ids() -> None:
     import sys
 
     if multiprocessing.parent_process() is None or "gymnasium" in sys.modules:
-        from stori_jax.gym_adapter import register_all
+        from stori_jax.compat.gymnasium import register_all
 
         register_all()
 

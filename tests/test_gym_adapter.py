@@ -6,7 +6,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import stori_jax
-from stori_jax.gym_adapter import StoriGymEnv, env_id
+from stori_jax.compat.gymnasium import StoriGymEnv, env_id
 
 
 def test_every_preset_is_registered():
@@ -200,7 +200,7 @@ def test_reset_options_are_refused_not_ignored(vector):
 
 
 def test_a_config_of_ones_own_through_the_adapter_classes():
-    from stori_jax.gym_adapter import StoriGymEnv, StoriVectorEnv
+    from stori_jax.compat.gymnasium import StoriGymEnv, StoriVectorEnv
 
     env = StoriGymEnv("Breakout", config=stori_jax.Config(ram_observation=True), obs="ram",
                       num_workers=0)
@@ -718,7 +718,7 @@ def test_ale_grayscale_is_ales_own_luminance():
     import ale_py
     from ale_py import roms
 
-    from stori_jax.gym_adapter import ale_grayscale
+    from stori_jax.compat.ale import ale_grayscale
 
     ale_py.ALEInterface.setLoggerMode(ale_py.LoggerMode.Error)
     rng = np.random.default_rng(0)
@@ -800,13 +800,58 @@ def test_cleanrls_wrapper_stack_runs_over_a_preset_and_a_seed_repeats_the_run():
     assert not np.array_equal(first[:11], run(6, steps=10))
 
 
+@pytest.mark.parametrize("game", stori_jax.STORI_GAMES)
+def test_the_ale_stand_in_before_the_first_reset_answers_as_ale_pys(game):
+    """ale.lives() before the first reset raised; ale-py's answers the game's lives at power-on
+    (Breakout 5, Boxing 0, Gopher 3, BankHeist 4) and game_over() False, as the stand-in now
+    does, without a step.  What needs no emulator answers as ale-py's; the screen and the RAM
+    say to call reset()."""
+    import ale_py
+
+    gym.register_envs(ale_py)
+    theirs = gym.make(f"ALE/{game}-v5").unwrapped
+    env = gym.make(f"stori_ALE/{game}-2.1-v5", num_workers=0)
+    try:
+        ale, their_ale = env.unwrapped.ale, theirs.ale
+        assert ale.lives() == their_ale.lives() == stori_jax.get_game(game).start_lives
+        assert ale.game_over() is their_ale.game_over() is False
+        assert ale.game_over(with_truncation=False) is False
+        assert ale.getScreenDims() == tuple(their_ale.getScreenDims())
+        assert ale.getRAMSize() == their_ale.getRAMSize()
+        assert ale.getMinimalActionSet() == list(their_ale.getMinimalActionSet())
+        assert ale.getLegalActionSet() == list(their_ale.getLegalActionSet())
+        assert env.unwrapped.get_action_meanings() == theirs.get_action_meanings()
+        for name in ("getScreenRGB", "getScreenGrayscale", "getRAM"):
+            with pytest.raises(RuntimeError, match=rf"ale\.{name}\(\): call reset\(\) first"):
+                getattr(ale, name)()
+        assert env.unwrapped._env.phase is stori_jax.Phase.NEEDS_RESET  # no reset, no step
+        _, info = env.reset(seed=0)
+        theirs.reset(seed=0)
+        assert ale.lives() == int(info["lives"]) == their_ale.lives()
+    finally:
+        env.close()
+        theirs.close()
+
+
+def test_a_game_outside_stori_counts_its_power_on_lives_as_ale_does():
+    import ale_py
+
+    gym.register_envs(ale_py)
+    for game in ("Pong", "MontezumaRevenge"):
+        theirs = gym.make(f"ALE/{game}-v5")
+        try:
+            assert stori_jax.get_game(game).start_lives == theirs.unwrapped.ale.lives()
+        finally:
+            theirs.close()
+
+
 def test_ale_keywords_have_ale_pys_meanings():
     """obs_type (rgb / grayscale / ram), max_num_frames_per_episode, render('rgb_array'),
     ale.lives() / getRAM / get_action_meanings, and repeat_action_probability as STORI's
     sticky type 1."""
     import ale_py
 
-    from stori_jax.gym_adapter import ale_grayscale
+    from stori_jax.compat.ale import ale_grayscale
 
     gym.register_envs(ale_py)
     env = gym.make("stori_jax:stori_ALE/Breakout-3.1-v5", render_mode="rgb_array", num_workers=0,
@@ -880,7 +925,7 @@ def test_ale_keywords_it_cannot_honour_are_refused_by_name(env_id, kwargs, patte
 
 
 def test_the_ale_style_ids_are_registered_beside_the_v0_ones():
-    from stori_jax.gym_adapter import ale_env_id
+    from stori_jax.compat.ale import ale_env_id
 
     for game, name in stori_jax.list_presets():
         for frameskip in (4, 1):

@@ -188,7 +188,7 @@ def test_rollout_rejects_bad_arguments():
                                  1, obs=traj.last_obs)  # continuing a run
         assert more.obs.shape == (1, 1, 128)
 
-    from stori_jax.gym_adapter import StoriGymEnv
+    from stori_jax.compat.gymnasium import StoriGymEnv
 
     single = StoriGymEnv("Breakout")  # one numpy env: its (84, 84, 4) obs is no batch
     try:

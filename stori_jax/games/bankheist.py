@@ -124,6 +124,6 @@ LABELS = {
     "city_blocks_68": lambda ram: ram[..., CITY_BLOCKS_B],
 }
 
-GAME = GameSpec(name="BankHeist", rom_id="bank_heist", num_actions=18, regions=REGIONS,
-                blackout_modes=BLACKOUT, ram_obs_modes=RAM_OBS, event_modes=EVENTS, labels=LABELS,
-                default_replacement_actions=tuple(range(10)))
+GAME = GameSpec(name="BankHeist", rom_id="bank_heist", num_actions=18, start_lives=4,
+                regions=REGIONS, blackout_modes=BLACKOUT, ram_obs_modes=RAM_OBS, event_modes=EVENTS,
+                labels=LABELS, default_replacement_actions=tuple(range(10)))

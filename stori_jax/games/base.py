@@ -107,6 +107,9 @@ class GameSpec:
     name: str
     rom_id: str
     num_actions: int
+    # ALE's lives() of the game at power-on (its ROM loaded, no reset yet): what ale-py's env
+    # answers before its first reset; 0 for a game ALE counts no lives of (Boxing)
+    start_lives: int
     regions: Mapping[str, Region] = field(default_factory=dict)
     blackout_modes: Mapping[int, BlackoutMode] = field(default_factory=dict)
     ram_obs_modes: Mapping[int, RamObsMode] = field(default_factory=dict)

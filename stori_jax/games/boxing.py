@@ -101,5 +101,6 @@ LABELS = {
                   (PLAYER_COLOUR, ENEMY_COLOUR, RING_COLOUR, CLOCK_COLOUR)),
 }
 
-GAME = GameSpec(name="Boxing", rom_id="boxing", num_actions=18, regions=REGIONS,
-                blackout_modes=BLACKOUT, ram_obs_modes=RAM_OBS, event_modes=EVENTS, labels=LABELS)
+GAME = GameSpec(name="Boxing", rom_id="boxing", num_actions=18, start_lives=0,
+                regions=REGIONS, blackout_modes=BLACKOUT, ram_obs_modes=RAM_OBS, event_modes=EVENTS,
+                labels=LABELS)

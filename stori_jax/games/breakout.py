@@ -87,5 +87,6 @@ LABELS = {
     **byte_labels([f"score_digit_{k}" for k in range(3)], SCORE_DIGITS),
 }
 
-GAME = GameSpec(name="Breakout", rom_id="breakout", num_actions=4, regions=REGIONS,
-                blackout_modes=BLACKOUT, ram_obs_modes=RAM_OBS, event_modes=EVENTS, labels=LABELS)
+GAME = GameSpec(name="Breakout", rom_id="breakout", num_actions=4, start_lives=5,
+                regions=REGIONS, blackout_modes=BLACKOUT, ram_obs_modes=RAM_OBS, event_modes=EVENTS,
+                labels=LABELS)

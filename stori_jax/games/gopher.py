@@ -135,5 +135,6 @@ LABELS = {
     **byte_labels([f"duck_{a}" for a in DUCK_RAM], DUCK_RAM),
 }
 
-GAME = GameSpec(name="Gopher", rom_id="gopher", num_actions=8, regions=REGIONS,
-                blackout_modes=BLACKOUT, ram_obs_modes=RAM_OBS, event_modes=EVENTS, labels=LABELS)
+GAME = GameSpec(name="Gopher", rom_id="gopher", num_actions=8, start_lives=3,
+                regions=REGIONS, blackout_modes=BLACKOUT, ram_obs_modes=RAM_OBS, event_modes=EVENTS,
+                labels=LABELS)
