@@ -26,7 +26,8 @@ RAM_SIZE = 128
 
 # the ALE ROM id of every covered game (its module's name)
 GAMES = (
-    "bank_heist", "boxing", "breakout", "freeway", "gopher", "pong",
+    "bank_heist", "bowling", "boxing", "breakout", "double_dunk", "freeway", "gopher",
+    "ice_hockey", "pacman", "pong", "star_gunner", "tennis", "up_n_down",
 )
 
 
@@ -103,12 +104,13 @@ def _evaluate(cls: ObjectClass, r) -> Boxes:
         v = jnp.asarray(v)
         if v.ndim == 1 and cls.slots == 1:  # one object: (B,) per env
             v = v[:, None]  # (with several slots, a 1-D array is one value per slot)
-        parts.append(jnp.broadcast_to(v, (batch, cls.slots)))
-    x, y, w, h, present = parts
+        parts.append(v)
+    width = max([cls.slots] + [v.shape[-1] for v in parts if v.ndim])
+    x, y, w, h, present = (jnp.broadcast_to(v, (batch, width)) for v in parts)
     present = present.astype(bool)
     x, y, w, h = (jnp.where(present, v, 0).astype(jnp.int32) for v in (x, y, w, h))
-    if cls.slots > 1:  # present objects first, in the formula's order
-        order = jnp.argsort(~present, axis=1, stable=True)
+    if width > 1:  # present objects first, in the formula's order; at most `slots` of them
+        order = jnp.argsort(~present, axis=1, stable=True)[:, :cls.slots]
         x, y, w, h, present = (jnp.take_along_axis(v, order, axis=1)
                                for v in (x, y, w, h, present))
     return Boxes(x, y, w, h, present)
