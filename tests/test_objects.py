@@ -28,6 +28,29 @@ def load(rom_id):
     return data["ram"], expected
 
 
+def repack(boxes, keep):
+    """``boxes`` with only the objects where ``keep`` (T, S), present ones first again."""
+    present = boxes.present & keep
+    order = np.argsort(~present, axis=1, kind="stable")
+    fields = [np.where(present, v, 0) for v in boxes[:4]] + [present]
+    return O.Boxes(*(np.take_along_axis(v, order, axis=1) for v in fields))
+
+
+# Where OCAtari 2.2.1 is wrong: (rom_id, class) -> (why, fix(ram, boxes) -> the right boxes)
+def _asterix_empty_lanes(ram, boxes):
+    lane = np.clip((boxes.y - 26) // 16, 0, 7)
+    empty = np.take_along_axis(ram[:, 18 - np.arange(8)].astype(np.int32), lane, axis=1) == 11
+    return repack(boxes, ~empty)
+
+
+OCATARI_ERRORS = {
+    ("asterix", "Enemy"): ("keeps an enemy in a lane that empties (RAM[18 - lane] == 11) at its "
+                           "last box", _asterix_empty_lanes),
+    ("asterix", "Consumable"): ("keeps a consumable in a lane that empties at its last box",
+                                _asterix_empty_lanes),
+}
+
+
 def first_difference(got, want):
     for field in O.Boxes._fields:
         g, w = np.asarray(getattr(got, field)), getattr(want, field)
@@ -49,6 +72,8 @@ def test_objects_equal_ocatari(rom_id):
     # classes OCAtari knows but does not list and never reported on this trajectory)
     assert [c for c in ours if c in expected] == list(expected)
     for name, want in expected.items():
+        if (rom_id, name) in OCATARI_ERRORS:
+            want = OCATARI_ERRORS[rom_id, name][1](ram, want)
         g = got[name]
         slots = want.x.shape[1]
         assert g.x.shape[1] >= slots, (name, g.x.shape, want.x.shape)

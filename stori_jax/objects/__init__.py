@@ -26,7 +26,7 @@ RAM_SIZE = 128
 
 # the ALE ROM id of every covered game (its module's name)
 GAMES = (
-    "bank_heist", "bowling", "boxing", "breakout", "double_dunk", "freeway", "gopher",
+    "air_raid", "asterix", "bank_heist", "bowling", "boxing", "breakout", "double_dunk", "freeway", "gopher",
     "ice_hockey", "pacman", "pong", "star_gunner", "tennis", "up_n_down",
 )
 
