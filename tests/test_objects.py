@@ -43,7 +43,17 @@ def _asterix_empty_lanes(ram, boxes):
     return repack(boxes, ~empty)
 
 
+def _seaquest_reappearing_player(ram, boxes):
+    """On the frame the submarine reappears OCAtari gives its start box (76, 46), not the RAM's."""
+    x, y = boxes.x.copy(), boxes.y.copy()
+    back = boxes.present[:, 0] & np.r_[False, ~boxes.present[:-1, 0]]
+    x[back, 0], y[back, 0] = ram[back, 70], ram[back, 97].astype(np.int32) + 33
+    return boxes._replace(x=x, y=y)
+
+
 OCATARI_ERRORS = {
+    ("seaquest", "Player"): ("reports the start box on the frame the submarine reappears",
+                             _seaquest_reappearing_player),
     ("asterix", "Enemy"): ("keeps an enemy in a lane that empties (RAM[18 - lane] == 11) at its "
                            "last box", _asterix_empty_lanes),
     ("asterix", "Consumable"): ("keeps a consumable in a lane that empties at its last box",
