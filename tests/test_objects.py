@@ -96,3 +96,55 @@ def test_objects_equal_ocatari(rom_id):
         assert problem is None, f"{rom_id} {name}: {problem}"
     for name in set(ours) - set(expected):
         assert got[name].present.shape[0] == ram.shape[0]
+
+
+def test_at_least_forty_games_and_the_stori_four():
+    names = O.covered_games()
+    assert {"Breakout", "Boxing", "Gopher", "BankHeist"} <= set(names)
+    assert names == tuple(sorted(names))
+    listing = O.listing()
+    assert listing["Breakout"] == {"Player": 1, "Ball": 1, "Block": 108}
+
+
+def test_game_names_are_the_project_spellings():
+    from stori_jax.games import get_game
+
+    for rom_id in O.GAMES:
+        table = O.object_table(rom_id)
+        spec = get_game(rom_id)  # the ALE ROM id and the name stori-jax gives the game
+        assert (table.rom_id, table.name) == (spec.rom_id, spec.name)
+        for spelling in (table.name, rom_id, rom_id.replace("_", ""), table.name.upper()):
+            assert O.object_table(spelling) is table
+
+
+def test_unknown_game_names_the_covered_games():
+    with pytest.raises(ValueError, match="no object table for game 'Skiing'.*'BankHeist'"):
+        O.objects_of("Skiing", np.zeros((1, 128), np.uint8))
+
+
+def test_unknown_class_names_the_games_classes():
+    with pytest.raises(ValueError, match=r"Breakout has no object class 'Brick'.*\['Player', "
+                                         r"'Ball', 'Block'\]"):
+        O.objects_of("Breakout", np.zeros((1, 128), np.uint8), classes=("Ball", "Brick"))
+
+
+@pytest.mark.parametrize("ram", [np.zeros((128,), np.uint8), np.zeros((2, 100), np.uint8),
+                                 np.zeros((2, 128), np.float32)])
+def test_bad_ram_is_refused(ram):
+    with pytest.raises(ValueError, match="ram must"):
+        O.objects_of("Pong", ram)
+
+
+def test_chosen_classes_flat_layout_and_jit():
+    import jax
+
+    ram, expected = load("pong")
+    ball = O.objects_of("Pong", ram, classes="Ball")
+    assert list(ball) == ["Ball"] and ball["Ball"].x.dtype == np.int32
+    assert ball["Ball"].present.dtype == bool and ball["Ball"].x.shape == (len(ram), 1)
+    flat = np.asarray(O.objects_array("Pong", ram))
+    assert flat.shape == (len(ram), 3, 5)  # Player, Ball, Enemy; (x, y, w, h, present)
+    np.testing.assert_array_equal(flat[:, 1, 0], expected["Ball"].x[:, 0])
+    np.testing.assert_array_equal(flat[:, 1, 4], expected["Ball"].present[:, 0])
+    inside = jax.jit(lambda r: O.objects_of("Pong", r)["Enemy"].y)(ram)
+    np.testing.assert_array_equal(np.asarray(inside), expected["Enemy"].y)
