@@ -26,8 +26,10 @@ RAM_SIZE = 128
 
 # the ALE ROM id of every covered game (its module's name)
 GAMES = (
-    "air_raid", "asterix", "bank_heist", "bowling", "boxing", "breakout", "donkey_kong", "double_dunk", "fishing_derby", "freeway", "galaxian", "gopher",
-    "ice_hockey", "jamesbond", "name_this_game", "pacman", "pong", "seaquest", "star_gunner", "tennis", "up_n_down", "video_pinball",
+    "air_raid", "asterix", "bank_heist", "bowling", "boxing", "breakout", "donkey_kong",
+    "double_dunk", "fishing_derby", "freeway", "galaxian", "gopher", "ice_hockey", "jamesbond",
+    "name_this_game", "pacman", "pong", "seaquest", "star_gunner", "tennis", "up_n_down",
+    "video_pinball",
 )
 
 
