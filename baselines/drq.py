@@ -53,8 +53,8 @@ import optax
 from baselines import runs
 from baselines.agents import Agent
 from baselines.evaluate import CHECKPOINT_POLICIES, stori_game
-from baselines.ppo import NETWORKS, TORSOS, TRAINING_KEYS, Conv, random_shift
-from baselines.runs import (RunConfig, append_csv, check_no_run_here, read_checkpoint, recorded_parts,
+from baselines.networks import NETWORKS, TORSOS, conv_torso, random_shift
+from baselines.runs import (TRAINING_KEYS, RunConfig, append_csv, check_no_run_here, read_checkpoint, recorded_parts,
                             rewrite_csv, rows_upto, save_checkpoint, software_parts,
                             write_summary)
 from stori_jax.checks import MAX_SEED, check_int, check_real
@@ -181,7 +181,7 @@ def updates_due(config: DrQConfig, transitions: int) -> int:
 
 class QNetwork(nn.Module):
     """Q-values (B, A) of frame stacks (B, 84, 84, 4) in pixel units (uint8, or the float
-    augmented ones): an Atari torso (``ppo.TORSOS``, VALID convolutions as in Mnih 2015) and a
+    augmented ones): an Atari torso (``networks.TORSOS``, VALID convolutions as in Mnih 2015) and a
     dueling head, value + advantage - mean advantage, on a shared hidden layer (Dopamine's
     FullRainbowNetwork without noise or atoms)."""
 
@@ -190,13 +190,9 @@ class QNetwork(nn.Module):
 
     @nn.compact
     def __call__(self, obs):
-        convs, width = TORSOS[self.network]
-        x = obs.astype(jnp.float32) / 255.0
-        for features, kernel, stride in convs:
-            x = nn.relu(Conv(features, kernel, stride)(x))
-        x = x.reshape(x.shape[0], -1)
+        x = conv_torso(obs, self.network)
         dense = functools.partial(nn.Dense, kernel_init=nn.initializers.xavier_uniform())
-        x = nn.relu(dense(width)(x))
+        x = nn.relu(dense(TORSOS[self.network][1])(x))
         advantage = dense(self.num_actions)(x)
         value = dense(1)(x)
         return value + advantage - advantage.mean(axis=-1, keepdims=True)
@@ -215,7 +211,7 @@ def make_optimizer(config: DrQConfig) -> optax.GradientTransformation:
 def augment(obs: jax.Array, key, pad: int, intensity_scale: float) -> jax.Array:
     """DrQ's augmentation of a batch of float frame stacks (B, 84, 84, 4), each sample its
     own draw: shifted by up to ``pad`` pixels (padded with its edge values and cropped back,
-    :func:`baselines.ppo.random_shift`), then scaled by 1 + ``intensity_scale`` x a standard
+    :func:`baselines.networks.random_shift`), then scaled by 1 + ``intensity_scale`` x a standard
     normal clipped to [-2, 2] (Dopamine's ``drq_image_augmentation``).  The identity at pad 0
     and scale 0."""
     shift_key, noise_key = jax.random.split(key)

@@ -27,7 +27,8 @@ import optax
 from baselines import runs
 from baselines.agents import Agent
 from baselines.evaluate import CHECKPOINT_POLICIES, stori_game
-from baselines.runs import (RunConfig, append_csv, check_no_finished_run, check_no_run_here,  # noqa: F401
+from baselines.networks import NETWORKS, TORSOS, conv_torso, random_shift
+from baselines.runs import (TRAINING_KEYS, RunConfig, append_csv, check_no_run_here,
                             read_checkpoint, recorded_parts, rewrite_csv, rows_upto,
                             save_checkpoint, software_parts, write_summary)
 from stori_jax.checks import check_int, check_real
@@ -35,7 +36,6 @@ from stori_jax.core import agent_key
 from stori_jax.presets import canonical_preset
 from stori_jax.provenance import software
 
-NETWORKS = ("nature", "nips", "tiny")
 ACTION_HEADS = ("joint", "factored")
 # ALE's full action set by name, in index order (games whose minimal set is all 18 use it as is)
 FULL_ACTION_SET = [a.name for a in sorted(ale_py.Action.__members__.values(),
@@ -143,45 +143,6 @@ class PPOConfig(RunConfig):
 
 # -- network --------------------------------------------------------------------------------------
 
-def space_to_depth(x: jax.Array, block: int) -> jax.Array:
-    n, h, w, c = x.shape
-    x = x.reshape(n, h // block, block, w // block, block, c).transpose(0, 1, 3, 2, 4, 5)
-    return x.reshape(n, h // block, w // block, block * block * c)
-
-
-def patches(x: jax.Array, size: int) -> jax.Array:
-    """Every ``size`` x ``size`` window (stride 1, VALID) flattened into the channel axis."""
-    n, h, w, c = x.shape
-    oh, ow = h - size + 1, w - size + 1
-    return jnp.concatenate([x[:, i:i + oh, j:j + ow] for i in range(size) for j in range(size)],
-                           axis=-1)
-
-
-class Conv(nn.Module):
-    """A VALID convolution written as space-to-depth + window gather + one matmul: the same
-    function as ``nn.Conv(features, (k, k), (s, s))`` (weights in another order), about twice as
-    fast to train on a CPU, where XLA's strided convolutions are slow."""
-
-    features: int
-    kernel: int
-    stride: int
-
-    @nn.compact
-    def __call__(self, x):
-        if self.kernel % self.stride or x.shape[1] % self.stride or x.shape[2] % self.stride:
-            raise ValueError(f"Conv needs kernel and input divisible by the stride, got kernel "
-                             f"{self.kernel}, stride {self.stride}, input {x.shape[1:3]}")
-        x = patches(space_to_depth(x, self.stride), self.kernel // self.stride)
-        return nn.Dense(self.features, kernel_init=nn.initializers.orthogonal(np.sqrt(2)))(x)
-
-
-TORSOS = {  # (features, kernel, stride) per conv layer, then the dense layer's width
-    "nature": ([(32, 8, 4), (64, 4, 2), (64, 3, 1)], 512),
-    "nips": ([(16, 8, 4), (32, 4, 2)], 256),
-    "tiny": ([(8, 8, 4)], 32),
-}
-
-
 def direction_and_fire(names: list[str]) -> np.ndarray:
     """(A, 2) int32: each action as (its direction's index, 1 if it fires).  ALE's full set is
     every one of 9 directions (NOOP, UP, RIGHT, ..., DOWNLEFT) with and without FIRE."""
@@ -209,12 +170,8 @@ class ActorCritic(nn.Module):
 
     @nn.compact
     def __call__(self, obs):
-        convs, width = TORSOS[self.network]
-        x = obs.astype(jnp.float32) / 255.0
-        for features, kernel, stride in convs:
-            x = nn.relu(Conv(features, kernel, stride)(x))
-        x = x.reshape(x.shape[0], -1)
-        x = nn.relu(nn.Dense(width, kernel_init=nn.initializers.orthogonal(np.sqrt(2)))(x))
+        x = conv_torso(obs, self.network)
+        x = nn.relu(nn.Dense(TORSOS[self.network][1], kernel_init=nn.initializers.orthogonal(np.sqrt(2)))(x))
 
         def head(size):
             return nn.Dense(size, kernel_init=nn.initializers.orthogonal(0.01))(x)
@@ -379,17 +336,6 @@ def gae(rollout: Rollout, last_value, gamma: float, lam: float):
     _, advantages = jax.lax.scan(backwards, (last_value, jnp.zeros_like(last_value)),
                                  (rollout.reward, rollout.value, rollout.done), reverse=True)
     return advantages, advantages + rollout.value
-
-
-def random_shift(obs: jax.Array, key, pad: int) -> jax.Array:
-    """DrQ's image augmentation: each (H, W, C) frame stack of the batch padded by ``pad``
-    pixels (edges repeated) and cropped back to (H, W) at its own random offset, so the whole
-    stack moves by up to ``pad`` pixels in each direction."""
-    n, h, w, c = obs.shape
-    padded = jnp.pad(obs, ((0, 0), (pad, pad), (pad, pad), (0, 0)), mode="edge")
-    offsets = jax.random.randint(key, (n, 2), 0, 2 * pad + 1)
-    return jax.vmap(lambda frame, at: jax.lax.dynamic_slice(frame, (at[0], at[1], 0), (h, w, c)))(
-        padded, offsets)
 
 
 def ppo_loss(network, config: PPOConfig, params, batch):
@@ -630,10 +576,6 @@ def load_policy(checkpoint: Path, mode: str = "sampled"):
     """(config, policy(obs, key) -> (B,) int32 actions) of a checkpoint, acting ``sampled``
     (from its distribution) or ``greedy`` (argmax), jitted."""
     return policy_of(load_checkpoint(checkpoint), mode)
-
-
-# how far an evaluated checkpoint's run had trained, as an evaluation records it
-TRAINING_KEYS = ("trained_agent_steps", "run_total_steps", "run_finished")
 
 
 def progress_of(config: PPOConfig, agent_steps: int) -> dict:

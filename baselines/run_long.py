@@ -60,8 +60,9 @@ def evaluate_once(config, checkpoint: Path, out_dir: Path, *, episodes: int, num
 def _iterations_done(run: Path) -> int:
     """How far the run in ``run`` has trained: its checkpoint's iteration (0 for no run, or
     one stopped before its first checkpoint, which starts again).  A finished run whose
-    checkpoint is gone is refused (:func:`baselines.ppo.check_no_finished_run`)."""
-    from baselines.ppo import check_no_finished_run, load_checkpoint
+    checkpoint is gone is refused (:func:`baselines.runs.check_no_finished_run`)."""
+    from baselines.ppo import load_checkpoint
+    from baselines.runs import check_no_finished_run
 
     if (run / "checkpoint.pkl").exists():
         return load_checkpoint(run / "checkpoint.pkl")["iteration"]

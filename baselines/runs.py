@@ -13,6 +13,9 @@ from pathlib import Path
 
 import jax
 
+# how far an evaluated checkpoint's run had trained, as an evaluation records it
+TRAINING_KEYS = ("trained_agent_steps", "run_total_steps", "run_finished")
+
 
 def save_checkpoint(path: Path, payload: dict) -> None:
     """Atomically write ``payload`` (params, optimizer state, keys, env snapshots, ...)."""

@@ -21,6 +21,7 @@ import numpy as np
 
 import stori_jax
 from baselines import ppo
+from baselines.networks import NETWORKS
 from stori_jax.provenance import software
 from baselines.run_evidence import EVIDENCE_HYPERPARAMETERS, GAME_HYPERPARAMETERS
 from _checks import (options_in_name, output_directory, require_at_least_one,  # on sys.path
@@ -138,7 +139,7 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--game", default="Breakout")
     parser.add_argument("--preset", default="3.1")
-    parser.add_argument("--network", default="nips", choices=list(ppo.NETWORKS))
+    parser.add_argument("--network", default="nips", choices=list(NETWORKS))
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--out", type=Path, default=RESULTS, help="directory for the results")
     args = parser.parse_args(argv)

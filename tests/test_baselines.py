@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 import stori_jax
-from baselines import ppo, runs
+from baselines import networks, ppo, runs
 from baselines.evaluate import evaluate, write_result
 from baselines.table import (PAPER_RESULTS, STD_OVER_SEEDS, aggregate, build_table, learning_curves,
                              load_evaluations, markdown, smoothed)
@@ -48,7 +48,7 @@ def random_frames(n, seed=0):
                                                          (64, 3, 1, 9)])
 def test_conv_is_the_usual_convolution(features, kernel, stride, size):
     x = np.random.default_rng(0).uniform(size=(2, size, size, 5)).astype(np.float32)
-    conv = ppo.Conv(features, kernel, stride)
+    conv = networks.Conv(features, kernel, stride)
     params = jax.jit(conv.init)(jax.random.PRNGKey(1), x)
     dense = params["params"]["Dense_0"]
     k = kernel // stride
@@ -138,7 +138,7 @@ def test_an_update_lowers_the_loss_on_a_fixed_batch(augment_shift, game, action_
 def test_random_shift_crops_the_edge_padded_frames_at_offsets_within_the_pad():
     pad = 3
     obs = jnp.asarray(random_frames(32))
-    shifted = np.asarray(ppo.random_shift(obs, jax.random.PRNGKey(1), pad))
+    shifted = np.asarray(networks.random_shift(obs, jax.random.PRNGKey(1), pad))
     assert shifted.shape == obs.shape and shifted.dtype == np.uint8
     padded = np.pad(np.asarray(obs), ((0, 0), (pad, pad), (pad, pad), (0, 0)), mode="edge")
     offsets = []
@@ -148,8 +148,8 @@ def test_random_shift_crops_the_edge_padded_frames_at_offsets_within_the_pad():
         assert len(found) == 1, "every output is one crop of its own padded frame stack"
         offsets.append(found[0])
     assert len(set(offsets)) > 10, "each sample draws its own offset"
-    np.testing.assert_array_equal(ppo.random_shift(obs, jax.random.PRNGKey(1), pad), shifted)
-    np.testing.assert_array_equal(ppo.random_shift(obs, jax.random.PRNGKey(1), 0), obs)
+    np.testing.assert_array_equal(networks.random_shift(obs, jax.random.PRNGKey(1), pad), shifted)
+    np.testing.assert_array_equal(networks.random_shift(obs, jax.random.PRNGKey(1), 0), obs)
 
 
 @pytest.mark.parametrize("field, value, message", [
