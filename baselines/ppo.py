@@ -12,7 +12,6 @@ emulators' states too).  Command line: ``stori-jax train ppo --game Breakout --p
 from __future__ import annotations
 
 import dataclasses
-import json
 import time
 from pathlib import Path
 from typing import NamedTuple
@@ -28,13 +27,11 @@ from baselines import runs
 from baselines.agents import Agent
 from baselines.evaluate import CHECKPOINT_POLICIES, stori_game
 from baselines.networks import NETWORKS, TORSOS, conv_torso, random_shift
-from baselines.runs import (TRAINING_KEYS, RunConfig, append_csv, check_no_run_here,
-                            read_checkpoint, recorded_parts, rewrite_csv, rows_upto,
-                            save_checkpoint, software_parts, write_summary)
+from baselines.runs import (TRAINING_KEYS, RunConfig, append_csv, read_checkpoint,
+                            recorded_parts, save_checkpoint, write_summary)
 from stori_jax.checks import check_int, check_real
 from stori_jax.core import agent_key
 from stori_jax.presets import canonical_preset
-from stori_jax.provenance import software
 
 ACTION_HEADS = ("joint", "factored")
 # ALE's full action set by name, in index order (games whose minimal set is all 18 use it as is)
@@ -424,13 +421,6 @@ def check_checkpoint(payload: dict, path: Path) -> dict:
 
 # -- training -------------------------------------------------------------------------------------
 
-def _checked_checkpoint(config: PPOConfig, ckpt_path: Path, stop_after: int | None) -> dict:
-    """The checkpoint a resume continues: trained under ``config``, with all a run needs, and
-    not beyond ``stop_after``."""
-    return runs.resumable(load_checkpoint(ckpt_path), config, ckpt_path, RESUME_STATE,
-                          stop_after)
-
-
 def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool = True,
           stop_after: int | None = None) -> dict:
     """Train PPO; write ``out``/config.json, log.csv, episodes.csv, checkpoint.pkl and
@@ -443,23 +433,14 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
     finished run's summary.json if an interruption came before it)."""
     from tqdm import tqdm
 
-    made_with = software()  # before training, not whatever is installed when it ends
-    if stop_after is not None:
-        check_int("stop_after", stop_after, 1)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    ckpt_path, log_path, ep_path = out / "checkpoint.pkl", out / "log.csv", out / "episodes.csv"
-    last = config.num_iterations if stop_after is None else min(stop_after,
-                                                                config.num_iterations)
-    if not resume:
-        check_no_run_here(out, "ppo")
-    ckpt = _checked_checkpoint(config, ckpt_path, stop_after) if resume else None
-    if ckpt is not None and ckpt["iteration"] == last:  # nothing to train
+    run = runs.start_training(config, out, "ppo", resume=resume, stop_after=stop_after,
+                              load_checkpoint=load_checkpoint, resume_state=RESUME_STATE,
+                              log_fields=LOG_FIELDS, episode_fields=EPISODE_FIELDS)
+    out, ckpt, last, ckpt_path = run.out, run.ckpt, run.last, run.checkpoint
+    if run.nothing_to_train:
         parts = recorded_parts(ckpt)
-        summary = _summary(config, last, ckpt["elapsed_s"], parts[-1]["software"], parts)
-        if not (out / "summary.json").exists():  # an interruption came before it
-            write_summary(out, summary)
-        return dict(summary, iterations_now=0, agent_steps_now=0)
+        return run.untrained(_summary(config, last, ckpt["elapsed_s"], parts[-1]["software"],
+                                      parts))
     envs = make_envs(config)
     try:
         network = make_network(config, envs[0].num_actions)
@@ -470,12 +451,9 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
         if ckpt is not None:
             params, opt_state = ckpt["params"], ckpt["opt_state"]
             key, start, obs = ckpt["key"], ckpt["iteration"], list(ckpt["obs"])
-            parts = software_parts(ckpt, start, made_with, ckpt_path)
+            parts = run.resume_files(start * config.batch_size)
             for env, snap in zip(envs, ckpt["envs"]):
                 env.restore(snap)
-            step = start * config.batch_size
-            for path, fields in ((log_path, LOG_FIELDS), (ep_path, EPISODE_FIELDS)):
-                rewrite_csv(path, fields, rows_upto(path, fields, step))
             elapsed = ckpt["elapsed_s"]
         else:
             key = agent_key(config.seed)  # the env seeds 2*seed, 2*seed+1 draw their own chains
@@ -484,10 +462,7 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
             params = network.init(init_key, obs[0])
             opt_state = optimizer.init(params)
             start, elapsed = 0, 0.0
-            parts = [dict(from_iteration=0, software=made_with)]
-            (out / "config.json").write_text(json.dumps(dataclasses.asdict(config), indent=1))
-            rewrite_csv(log_path, LOG_FIELDS, [])
-            rewrite_csv(ep_path, EPISODE_FIELDS, [])
+            parts = run.begin_files(config)
         bar = tqdm(total=config.num_iterations * config.batch_size, initial=start
                    * config.batch_size, unit="step", disable=not progress,
                    desc=f"ppo {config.game} {config.preset} seed {config.seed}")
@@ -517,8 +492,8 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
                        lr=lr, sps=step / elapsed, rollout_sps=config.batch_size / (t1 - t0),
                        update_s=t2 - t1, **{k: float(v) for k, v in metrics.items()
                                             if k in LOG_FIELDS})
-            append_csv(log_path, [[row[f] for f in LOG_FIELDS]])
-            append_csv(ep_path, episodes)
+            append_csv(run.log, [[row[f] for f in LOG_FIELDS]])
+            append_csv(run.episodes, episodes)
             bar.update(config.batch_size)
             bar.set_postfix(ret=f"{np.mean(recent):.1f}" if recent else "-",
                             sps=f"{step / elapsed:.0f}")
@@ -532,7 +507,7 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
     finally:
         for env in envs:
             env.close()
-    summary = _summary(config, last, elapsed, made_with, parts)
+    summary = _summary(config, last, elapsed, run.made_with, parts)
     write_summary(out, summary)
     return dict(summary, iterations_now=last - start,
                 agent_steps_now=(last - start) * config.batch_size)

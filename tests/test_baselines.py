@@ -513,7 +513,7 @@ def test_a_resumed_run_records_each_parts_software_and_warns_when_it_changed(
         ppo.train(tiny(), tmp_path, progress=False, stop_after=2, resume=True)
     first = provenance.software()
     later = dict(first, commit="0" * 40, packages=dict(first["packages"], jax="9.9"))
-    monkeypatch.setattr(ppo, "software", lambda: later)
+    monkeypatch.setattr(runs, "software", lambda: later)
     with pytest.warns(UserWarning, match=r"other software \(commit \S+ -> '0{40}'; "
                       r"jax '[^']+' -> '9\.9'\): from iteration 2 on"):
         ppo.train(tiny(), tmp_path, progress=False, resume=True)
@@ -547,7 +547,7 @@ def test_resuming_a_finished_run_touches_no_file(uninterrupted, monkeypatch):
     full, summary = uninterrupted
     files = {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in full.iterdir()}
     later = dict(summary["software"], commit="0" * 40)
-    monkeypatch.setattr(ppo, "software", lambda: later)
+    monkeypatch.setattr(runs, "software", lambda: later)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         again = ppo.train(tiny(), full, progress=False, resume=True)

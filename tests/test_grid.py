@@ -254,10 +254,10 @@ def test_the_cores_of_a_trial_cap_its_emulator_workers(monkeypatch):
     from baselines import ppo, runs
 
     monkeypatch.delenv(runs.CORES_VARIABLE, raising=False)
-    assert runs.worker_split(20) == {}  # make's own default
+    assert runs.workers_within_cores(20) == {}  # make's own default
     monkeypatch.setenv(runs.CORES_VARIABLE, "1")
     assert runs.cores() == 1
-    assert runs.worker_split(20) == dict(num_workers=1, inline_envs=0)
+    assert runs.workers_within_cores(20) == dict(num_workers=1, inline_envs=0)
     assert ppo.workers_per_half(8) == 1
     monkeypatch.setenv(runs.CORES_VARIABLE, "10000")  # never more than the affinity allows
     assert runs.cores() == len(os.sched_getaffinity(0))
