@@ -572,7 +572,7 @@ def test_resuming_a_run_stopped_before_its_summary_writes_it(uninterrupted, tmp_
 @pytest.fixture(scope="module")
 def staged_once(tmp_path_factory):
     """run_long.py's stages (1 and 2) of the tiny run (trained once per module)."""
-    from baselines import run_long
+    from baselines.evidence import run_long
 
     root = tmp_path_factory.mktemp("staged")
     run, by_step = root / "run", root / "by-step"
@@ -608,7 +608,7 @@ def test_a_run_trained_in_stages_is_the_uninterrupted_run_with_each_stage_evalua
     """The run ends as the uninterrupted one; each stage's checkpoint is the one a run stopped
     there holds, evaluated with its own progress; a second call trains and evaluates
     nothing."""
-    from baselines import run_long
+    from baselines.evidence import run_long
 
     full, _ = uninterrupted
     run, by_step = staged_once
@@ -637,7 +637,7 @@ def test_stages_resume_where_an_interruption_left_them(uninterrupted, staged, tm
                                                        monkeypatch):
     """Stopped at any point, the script does only what is left: a stage trained but not
     copied aside, a copy not evaluated, a run trained but without its summary."""
-    from baselines import run_long
+    from baselines.evidence import run_long
 
     full, _ = uninterrupted
     run, by_step = staged
@@ -664,7 +664,7 @@ def test_stages_refuse_what_they_cannot_resume(staged, tmp_path):
     """A run trained past a stage whose checkpoint is missing, a run without its checkpoint
     (a fresh clone's: checkpoints are not committed) and bad stages are refused by name;
     the run's files are left as they were."""
-    from baselines import run_long
+    from baselines.evidence import run_long
 
     run, by_step = staged
     log = (run / "log.csv").read_text()
@@ -696,7 +696,7 @@ def test_the_onset_table_lists_each_stages_evaluations_by_seed(tmp_path, monkeyp
     """run_long.py's onset.md: a row per agent steps (from each evaluation's own record, not
     its folder), each seed's mean ± episode std, the mean ± std of the seed means (saying how
     many seeds where some are missing), the random policy's row."""
-    from baselines import run_long
+    from baselines.evidence import run_long
 
     long_evaluation(tmp_path, "runs/seed0", 0, 3000, [4.0, 6.0])
     long_evaluation(tmp_path, "runs/seed7", 7, 3000, [1.0, 3.0])
@@ -721,8 +721,8 @@ def test_the_onset_table_lists_each_stages_evaluations_by_seed(tmp_path, monkeyp
 
 
 def test_the_random_policys_boxing_evaluations_are_the_recorded_ones():
-    from baselines import run_long
-    from baselines.run_evidence import run_dir
+    from baselines.evidence import run_long
+    from baselines.evidence.run_evidence import run_dir
 
     found = run_long.random_evaluations(run_long.SEEDS)
     assert sorted(found) == list(run_long.SEEDS)
@@ -742,7 +742,7 @@ def test_the_random_policys_boxing_evaluations_are_the_recorded_ones():
     ("short", dict(run_total_steps=100_000), r"run_total_steps is 100000, not 1000000"),
 ])
 def test_the_onset_refuses_evaluations_it_cannot_place(tmp_path, where, fields, match):
-    from baselines import run_long
+    from baselines.evidence import run_long
 
     with pytest.raises(ValueError, match=r"no evaluations below .*: run the script first"):
         run_long.write_onset(tmp_path)
@@ -1576,7 +1576,7 @@ def test_cli_errors_are_clear(argv, match, capsys):
     (["--only", "Pong-3.1"], "unknown runs ['Pong-3.1']"),
 ])
 def test_run_evidence_names_bad_runs_and_seeds(argv, match, monkeypatch, capsys):
-    from baselines import run_evidence
+    from baselines.evidence import run_evidence
 
     monkeypatch.setattr("sys.argv", ["run_evidence.py", "--stage", "table", *argv])
     with pytest.raises(SystemExit) as exit_info:

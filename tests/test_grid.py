@@ -278,7 +278,7 @@ def test_an_evaluation_already_there_is_reused_only_if_it_is_the_one_asked_for(t
         grid.reusable_result(path, dict(wanted, episodes=5), None)
 
 
-# -- the recorded evidence (baselines/run_grid_evidence.py) -----------------------------------
+# -- the recorded evidence (baselines/evidence/run_grid_evidence.py) -----------------------------------
 
 RECORDED = sorted((Path(__file__).resolve().parents[1] / "baselines" / "results").glob("grid-*"))
 
@@ -288,7 +288,7 @@ def test_a_recorded_grid_is_complete_its_own_table_and_the_serial_runs_twin(fold
     """Each recorded grid holds an evaluation of every run its grid.json lists (made with the
     evidence script's settings), its table is what they give, and the timing file says every
     run came out identical to the same run made serially."""
-    from baselines.run_grid_evidence import GRIDS
+    from baselines.evidence.run_grid_evidence import GRIDS
     from baselines.table import aggregate, load_evaluations
 
     timing = json.loads((folder / "timing.json").read_text())

@@ -10,7 +10,7 @@ train`` + ``eval`` alone would run them), and the two compared file by file.
   runs' Breakout settings, ``network=nips num_envs=16 num_steps=64 update_epochs=2
   num_minibatches=8``), trained in 2 parts, 10 evaluation episodes.
 
-    python baselines/run_grid_evidence.py [--only random ppo] [--work DIR] [--date YYYY-MM-DD]
+    python baselines/evidence/run_grid_evidence.py [--only random ppo] [--work DIR] [--date YYYY-MM-DD]
 
 The machine's load (1-minute load average, sampled every 5 s) is recorded beside each time:
 other work on the same cores slows either run.  The grid's outputs (tables, curves, the
@@ -31,7 +31,7 @@ import threading
 import time
 from pathlib import Path
 
-RESULTS = Path(__file__).resolve().parent / "results"
+RESULTS = Path(__file__).resolve().parents[1] / "results"
 GRIDS = {
     "random": dict(agent="random", games=None, presets=None, seeds=(0, 7, 13), steps=None,
                    eval_episodes=5, overrides=(), parts=4),
