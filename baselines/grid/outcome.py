@@ -1,5 +1,6 @@
-"""What a grid run did (:class:`GridOutcome`): which trials finished, which failed and why,
-which are unfinished; and its table."""
+"""What a grid run did (:class:`GridOutcome`): which trials finished, counted from the evaluation
+files in its folder (a grid stopped by Ctrl-C has finished the trials it evaluated, whether or
+not Tune heard them end), which failed and why, which are unfinished; and its table."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from pathlib import Path
 
 from baselines.grid.progress import table_of
 from baselines.grid.spec import label
+from baselines.grid.trial import evaluated
 
 
 @dataclasses.dataclass
@@ -32,7 +34,8 @@ def grid_outcome(results, trials: list, invalid: dict, out: Path, *, started: fl
                  resumed: bool) -> GridOutcome:
     """What the grid did: Tune's ``results`` (its ResultGrid, or [] where Tune never started)
     for ``trials``, beside ``invalid`` (label -> why a trial was refused before Ray started),
-    and the table of ``out``.  ``started``: ``time.perf_counter()`` when the grid started."""
+    and the files under ``out``: a trial whose evaluation file is in its run folder has
+    finished.  ``started``: ``time.perf_counter()`` when the grid started."""
     finished, failed = {}, dict(invalid)
     for result in results:
         trial = (result.config or {}).get("trial")  # None: a trial stopped before it started
@@ -45,6 +48,12 @@ def grid_outcome(results, trials: list, invalid: dict, out: Path, *, started: fl
             failed[name] = metrics["error"]
         elif metrics.get("phase") == "done":
             finished[name] = metrics
+    for trial in trials:  # evaluated, though Tune did not hear it end (stopped by Ctrl-C)
+        name = label(trial)
+        metrics = None if name in finished else evaluated(trial)
+        if metrics is not None:
+            finished[name] = metrics
+            failed.pop(name, None)
     unfinished = [label(t) for t in trials if label(t) not in finished | failed]
     table, table_error = None, None
     with contextlib.redirect_stderr(io.StringIO()) as notes:

@@ -89,6 +89,16 @@ def final_metrics(trial: dict, run: Path, result: dict) -> dict:
                 eval_seconds=result["seconds"], agent_steps=result.get("trained_agent_steps", 0))
 
 
+def evaluated(trial: dict) -> dict | None:
+    """The trial's final metrics if its evaluation file is in its run folder (the trial has
+    finished, whether or not Tune heard it); None without one, or one that cannot be read."""
+    run, _, path = trial_files(trial)
+    try:
+        return final_metrics(trial, run, json.loads(path.read_text()))
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
 def part_bounds(iterations: int, parts: int) -> list[int]:
     """The iterations after which a run of ``iterations`` stops, in ``parts`` parts as even as
     whole iterations allow (fewer parts than iterations are never made)."""
