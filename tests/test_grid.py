@@ -13,7 +13,9 @@ import os
 import pickle
 import shutil
 import signal
+import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -315,3 +317,17 @@ def test_a_recorded_grid_is_complete_its_own_table_and_the_serial_runs_twin(fold
         assert record["speedup"] == pytest.approx(record["serial"]["seconds"]
                                                   / record["grid"]["seconds"])
 
+
+def test_an_address_where_nothing_listens_is_an_error_that_names_it(tmp_path):
+    """--address 127.0.0.1:1 (nothing there) printed Ray's 'Failed to connect to GCS' for
+    minutes; now the command stops at once, naming the address, and writes nothing."""
+    out = tmp_path / "g"
+    argv = [sys.executable, "-m", "stori_jax.cli", "grid", "--agent", "random", "--games",
+            "Breakout", "--presets", "1", "--seeds", "0", "--eval-episodes", "1",
+            "--address", "127.0.0.1:1", "--out", str(out), "--quiet"]
+    started = time.monotonic()
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=120)
+    assert time.monotonic() - started < 30
+    assert done.returncode == 2
+    assert "--address 127.0.0.1:1: nothing accepts connections at 127.0.0.1:1" in done.stderr
+    assert "Failed to connect to GCS" not in done.stderr and not out.exists()

@@ -1,13 +1,15 @@
-"""Connecting to Ray: a local Ray on this machine's cores, or a running cluster by address;
-driving the grid from the head for a Ray Client;
+"""Connecting to Ray: a local Ray on this machine's cores, or a running cluster by address (its
+head checked first to accept connections); driving the grid from the head for a Ray Client;
 and the environment a trial's Ray worker gets back from the driver."""
 
 from __future__ import annotations
 
 import logging
 import os
+import socket
 
 OMP_NUM_THREAD_VARIABLE = "STORI_JAX_GRID_OMP_NUM_THREADS"  # the driver's OMP_NUM_THREADS
+CONNECT_TIMEOUT_S = 5.0  # how long the head at --address has to accept a connection
 
 
 def keep_omp_as_the_driver_has_it() -> None:
@@ -55,6 +57,23 @@ def connect(address: str | None) -> bool:
                              "one (docs/cluster.md), or leave --address out to start Ray on "
                              "this machine") from None
     return True
+
+
+def check_reachable(address: str | None, timeout: float = CONNECT_TIMEOUT_S) -> None:
+    """A ValueError naming ``address`` (``HOST:PORT`` or ``ray://HOST:PORT``) unless something
+    there accepts a TCP connection within ``timeout`` seconds: Ray itself would retry for
+    minutes.  None (a local Ray) and ``auto`` are Ray's to find."""
+    if address is None or address == "auto":
+        return
+    host, colon, port = address.removeprefix("ray://").rpartition(":")
+    if not colon or not host or not port.isdigit():
+        raise ValueError(f"--address {address}: give auto, HOST:PORT or ray://HOST:PORT")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except OSError as error:
+        raise ValueError(f"--address {address}: nothing accepts connections at {host}:{port} "
+                         f"({error}); start a Ray cluster there (docs/cluster.md), or leave "
+                         "--address out to start Ray on this machine") from None
 
 
 def is_client(address: str | None) -> bool:

@@ -173,6 +173,7 @@ def run_grid(spec: GridSpec, out: Path, *, address: str | None = None,
     if cpus_per_run <= 0:
         raise ValueError(f"--cpus-per-run must be > 0, got {cpus_per_run}")
     check_int("--max-failures", max_failures, 0)
+    cluster.check_reachable(address)  # before anything is written (Ray would retry for minutes)
     if cluster.is_client(address) and not Path(out).is_absolute():
         raise ValueError(f"--out {out}: with a ray:// address, give the absolute path of the "
                          "grid's folder on the cluster's shared storage")
