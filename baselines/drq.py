@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import json
 import time
 from fractions import Fraction
 from pathlib import Path
@@ -53,14 +52,12 @@ import optax
 from baselines import runs
 from baselines.agents import Agent
 from baselines.evaluate import CHECKPOINT_POLICIES, stori_game
-from baselines.ppo import NETWORKS, TORSOS, TRAINING_KEYS, Conv, random_shift
-from baselines.runs import (RunConfig, append_csv, check_no_run_here, read_checkpoint, recorded_parts,
-                            rewrite_csv, rows_upto, save_checkpoint, software_parts,
-                            write_summary)
+from baselines.networks import NETWORKS, TORSOS, conv_torso, random_shift
+from baselines.runs import (TRAINING_KEYS, RunConfig, append_csv, read_checkpoint,
+                            recorded_parts, save_checkpoint, write_summary)
 from stori_jax.checks import MAX_SEED, check_int, check_real
 from stori_jax.core import agent_key
 from stori_jax.presets import canonical_preset
-from stori_jax.provenance import software
 
 HISTORY = 3  # frames before the newest in a stack (stori's atari84 stacks 4)
 LOG_FIELDS = ("iteration", "global_step", "updates", "episodes", "mean_return", "mean_length",
@@ -181,7 +178,7 @@ def updates_due(config: DrQConfig, transitions: int) -> int:
 
 class QNetwork(nn.Module):
     """Q-values (B, A) of frame stacks (B, 84, 84, 4) in pixel units (uint8, or the float
-    augmented ones): an Atari torso (``ppo.TORSOS``, VALID convolutions as in Mnih 2015) and a
+    augmented ones): an Atari torso (``networks.TORSOS``, VALID convolutions as in Mnih 2015) and a
     dueling head, value + advantage - mean advantage, on a shared hidden layer (Dopamine's
     FullRainbowNetwork without noise or atoms)."""
 
@@ -190,13 +187,9 @@ class QNetwork(nn.Module):
 
     @nn.compact
     def __call__(self, obs):
-        convs, width = TORSOS[self.network]
-        x = obs.astype(jnp.float32) / 255.0
-        for features, kernel, stride in convs:
-            x = nn.relu(Conv(features, kernel, stride)(x))
-        x = x.reshape(x.shape[0], -1)
+        x = conv_torso(obs, self.network)
         dense = functools.partial(nn.Dense, kernel_init=nn.initializers.xavier_uniform())
-        x = nn.relu(dense(width)(x))
+        x = nn.relu(dense(TORSOS[self.network][1])(x))
         advantage = dense(self.num_actions)(x)
         value = dense(1)(x)
         return value + advantage - advantage.mean(axis=-1, keepdims=True)
@@ -215,7 +208,7 @@ def make_optimizer(config: DrQConfig) -> optax.GradientTransformation:
 def augment(obs: jax.Array, key, pad: int, intensity_scale: float) -> jax.Array:
     """DrQ's augmentation of a batch of float frame stacks (B, 84, 84, 4), each sample its
     own draw: shifted by up to ``pad`` pixels (padded with its edge values and cropped back,
-    :func:`baselines.ppo.random_shift`), then scaled by 1 + ``intensity_scale`` x a standard
+    :func:`baselines.networks.random_shift`), then scaled by 1 + ``intensity_scale`` x a standard
     normal clipped to [-2, 2] (Dopamine's ``drq_image_augmentation``).  The identity at pad 0
     and scale 0."""
     shift_key, noise_key = jax.random.split(key)
@@ -482,13 +475,6 @@ def make_env(config: DrQConfig):
                           num_workers=workers, inline_envs=0)
 
 
-def _checked_checkpoint(config: DrQConfig, ckpt_path: Path, stop_after: int | None) -> dict:
-    """The checkpoint a resume continues: trained under ``config``, with all a run needs, and
-    not beyond ``stop_after``."""
-    return runs.resumable(load_checkpoint(ckpt_path), config, ckpt_path, RESUME_STATE,
-                          stop_after)
-
-
 def crossed(every: int, before: int, after: int) -> bool:
     """Whether a multiple of ``every`` lies in (before, after]."""
     return after // every > before // every
@@ -503,24 +489,14 @@ def train(config: DrQConfig, out: Path, *, resume: bool = False, progress: bool 
     :func:`baselines.ppo.train` otherwise (software parts, nothing to train)."""
     from tqdm import tqdm
 
-    made_with = software()
-    if stop_after is not None:
-        check_int("stop_after", stop_after, 1)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    ckpt_path, log_path, ep_path = out / "checkpoint.pkl", out / "log.csv", out / "episodes.csv"
-    last = config.num_iterations if stop_after is None else min(stop_after,
-                                                                config.num_iterations)
-    if not resume:
-        check_no_run_here(out, "drq")
-    ckpt = _checked_checkpoint(config, ckpt_path, stop_after) if resume else None
-    if ckpt is not None and ckpt["iteration"] == last:  # nothing to train
+    run = runs.start_training(config, out, "drq", resume=resume, stop_after=stop_after,
+                              load_checkpoint=load_checkpoint, resume_state=RESUME_STATE,
+                              log_fields=LOG_FIELDS, episode_fields=EPISODE_FIELDS)
+    out, ckpt, last, ckpt_path = run.out, run.ckpt, run.last, run.checkpoint
+    if run.nothing_to_train:
         parts = recorded_parts(ckpt)
-        summary = _summary(config, last, int(ckpt["updates"]), ckpt["elapsed_s"],
-                           parts[-1]["software"], parts)
-        if not (out / "summary.json").exists():
-            write_summary(out, summary)
-        return dict(summary, iterations_now=0, agent_steps_now=0)
+        return run.untrained(_summary(config, last, int(ckpt["updates"]), ckpt["elapsed_s"],
+                                      parts[-1]["software"], parts))
     e = config.num_envs
     env = make_env(config)
     try:
@@ -534,10 +510,8 @@ def train(config: DrQConfig, out: Path, *, resume: bool = False, progress: bool 
                                jnp.asarray(ckpt["updates"], jnp.int32))
             buffer_state = load_replay(out / ckpt["replay"], start, m.buffer,
                                        m.buffer.init(empty_row()))
-            parts = software_parts(ckpt, start, made_with, ckpt_path)
+            parts = run.resume_files(start * e)
             env.restore(ckpt["envs"][0])
-            for path, fields in ((log_path, LOG_FIELDS), (ep_path, EPISODE_FIELDS)):
-                rewrite_csv(path, fields, rows_upto(path, fields, start * e))
             elapsed, pending = ckpt["elapsed_s"], ckpt["pending"]
         else:
             key = agent_key(config.seed)  # the env seed draws its own chain
@@ -549,10 +523,7 @@ def train(config: DrQConfig, out: Path, *, resume: bool = False, progress: bool 
             buffer_state = m.buffer.init(empty_row())
             start, elapsed = 0, 0.0
             pending = dict(episodes=[], metrics=[], updates=0)
-            parts = [dict(from_iteration=0, software=made_with)]
-            (out / "config.json").write_text(json.dumps(dataclasses.asdict(config), indent=1))
-            rewrite_csv(log_path, LOG_FIELDS, [])
-            rewrite_csv(ep_path, EPISODE_FIELDS, [])
+            parts = run.begin_files(config)
         bar = tqdm(total=config.num_iterations * e, initial=start * e, unit="step",
                    disable=not progress, desc=f"drq {config.game} {config.preset} seed "
                                               f"{config.seed}")
@@ -590,7 +561,7 @@ def train(config: DrQConfig, out: Path, *, resume: bool = False, progress: bool 
             # a log row every log_every agent steps and at the end (not where a stop_after
             # stops: the checkpoint keeps what the next row sums, as an uninterrupted run has it)
             if crossed(config.log_every, step - e, step) or finished:
-                _log(config, log_path, ep_path, iteration + 1, step, int(state.updates),
+                _log(config, run.log, run.episodes, iteration + 1, step, int(state.updates),
                      epsilon, elapsed, pending)
                 bar.set_postfix(ret=f"{np.mean(recent):.1f}" if recent else "-",
                                 eps=f"{epsilon:.2f}", sps=f"{step / elapsed:.0f}")
@@ -608,7 +579,7 @@ def train(config: DrQConfig, out: Path, *, resume: bool = False, progress: bool 
         updates = int(state.updates)
     finally:
         env.close()
-    summary = _summary(config, last, updates, elapsed, made_with, parts)
+    summary = _summary(config, last, updates, elapsed, run.made_with, parts)
     write_summary(out, summary)
     return dict(summary, iterations_now=last - start, agent_steps_now=(last - start) * e)
 

@@ -64,7 +64,7 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100,
     defaults to that seed + EVAL_SEED_OFFSET."""
     import jax
     import stori_jax
-    from baselines.runs import worker_split
+    from baselines.runs import workers_within_cores
     from stori_jax.provenance import software
     from tqdm import tqdm
 
@@ -113,7 +113,7 @@ def evaluate(game: str, preset: str, *, policy: str, episodes: int = 100,
     start, agent_steps = time.perf_counter(), 0
     with stori_jax.make(game, preset, num_envs=num_envs, seed=eval_seed, obs="atari84",
                         max_episode_frames=max_episode_frames,
-                        **worker_split(num_envs)) as env:  # a grid trial's share of cores
+                        **workers_within_cores(num_envs)) as env:  # a grid trial's share of cores
         obs, _ = env.reset()
         bar = tqdm(total=episodes, unit="episode", disable=not progress,
                    desc=f"eval {policy} {game} {preset}")

@@ -10,7 +10,7 @@ from pathlib import Path
 
 def add_commands(subparsers) -> None:
     from baselines.commands import add_parsers
-    from baselines.grid import add_parser as add_grid_parser
+    from baselines.grid.cli import add_parser as add_grid_parser
 
     add_parsers(subparsers)
     add_grid_parser(subparsers)  # grid: train + eval over games x presets x seeds on Ray Tune

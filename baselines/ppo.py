@@ -12,7 +12,6 @@ emulators' states too).  Command line: ``stori-jax train ppo --game Breakout --p
 from __future__ import annotations
 
 import dataclasses
-import json
 import time
 from pathlib import Path
 from typing import NamedTuple
@@ -27,15 +26,13 @@ import optax
 from baselines import runs
 from baselines.agents import Agent
 from baselines.evaluate import CHECKPOINT_POLICIES, stori_game
-from baselines.runs import (RunConfig, append_csv, check_no_finished_run, check_no_run_here,  # noqa: F401
-                            read_checkpoint, recorded_parts, rewrite_csv, rows_upto,
-                            save_checkpoint, software_parts, write_summary)
+from baselines.networks import NETWORKS, TORSOS, conv_torso, random_shift
+from baselines.runs import (TRAINING_KEYS, RunConfig, append_csv, read_checkpoint,
+                            recorded_parts, save_checkpoint, write_summary)
 from stori_jax.checks import check_int, check_real
 from stori_jax.core import agent_key
 from stori_jax.presets import canonical_preset
-from stori_jax.provenance import software
 
-NETWORKS = ("nature", "nips", "tiny")
 ACTION_HEADS = ("joint", "factored")
 # ALE's full action set by name, in index order (games whose minimal set is all 18 use it as is)
 FULL_ACTION_SET = [a.name for a in sorted(ale_py.Action.__members__.values(),
@@ -143,45 +140,6 @@ class PPOConfig(RunConfig):
 
 # -- network --------------------------------------------------------------------------------------
 
-def space_to_depth(x: jax.Array, block: int) -> jax.Array:
-    n, h, w, c = x.shape
-    x = x.reshape(n, h // block, block, w // block, block, c).transpose(0, 1, 3, 2, 4, 5)
-    return x.reshape(n, h // block, w // block, block * block * c)
-
-
-def patches(x: jax.Array, size: int) -> jax.Array:
-    """Every ``size`` x ``size`` window (stride 1, VALID) flattened into the channel axis."""
-    n, h, w, c = x.shape
-    oh, ow = h - size + 1, w - size + 1
-    return jnp.concatenate([x[:, i:i + oh, j:j + ow] for i in range(size) for j in range(size)],
-                           axis=-1)
-
-
-class Conv(nn.Module):
-    """A VALID convolution written as space-to-depth + window gather + one matmul: the same
-    function as ``nn.Conv(features, (k, k), (s, s))`` (weights in another order), about twice as
-    fast to train on a CPU, where XLA's strided convolutions are slow."""
-
-    features: int
-    kernel: int
-    stride: int
-
-    @nn.compact
-    def __call__(self, x):
-        if self.kernel % self.stride or x.shape[1] % self.stride or x.shape[2] % self.stride:
-            raise ValueError(f"Conv needs kernel and input divisible by the stride, got kernel "
-                             f"{self.kernel}, stride {self.stride}, input {x.shape[1:3]}")
-        x = patches(space_to_depth(x, self.stride), self.kernel // self.stride)
-        return nn.Dense(self.features, kernel_init=nn.initializers.orthogonal(np.sqrt(2)))(x)
-
-
-TORSOS = {  # (features, kernel, stride) per conv layer, then the dense layer's width
-    "nature": ([(32, 8, 4), (64, 4, 2), (64, 3, 1)], 512),
-    "nips": ([(16, 8, 4), (32, 4, 2)], 256),
-    "tiny": ([(8, 8, 4)], 32),
-}
-
-
 def direction_and_fire(names: list[str]) -> np.ndarray:
     """(A, 2) int32: each action as (its direction's index, 1 if it fires).  ALE's full set is
     every one of 9 directions (NOOP, UP, RIGHT, ..., DOWNLEFT) with and without FIRE."""
@@ -209,12 +167,8 @@ class ActorCritic(nn.Module):
 
     @nn.compact
     def __call__(self, obs):
-        convs, width = TORSOS[self.network]
-        x = obs.astype(jnp.float32) / 255.0
-        for features, kernel, stride in convs:
-            x = nn.relu(Conv(features, kernel, stride)(x))
-        x = x.reshape(x.shape[0], -1)
-        x = nn.relu(nn.Dense(width, kernel_init=nn.initializers.orthogonal(np.sqrt(2)))(x))
+        x = conv_torso(obs, self.network)
+        x = nn.relu(nn.Dense(TORSOS[self.network][1], kernel_init=nn.initializers.orthogonal(np.sqrt(2)))(x))
 
         def head(size):
             return nn.Dense(size, kernel_init=nn.initializers.orthogonal(0.01))(x)
@@ -381,17 +335,6 @@ def gae(rollout: Rollout, last_value, gamma: float, lam: float):
     return advantages, advantages + rollout.value
 
 
-def random_shift(obs: jax.Array, key, pad: int) -> jax.Array:
-    """DrQ's image augmentation: each (H, W, C) frame stack of the batch padded by ``pad``
-    pixels (edges repeated) and cropped back to (H, W) at its own random offset, so the whole
-    stack moves by up to ``pad`` pixels in each direction."""
-    n, h, w, c = obs.shape
-    padded = jnp.pad(obs, ((0, 0), (pad, pad), (pad, pad), (0, 0)), mode="edge")
-    offsets = jax.random.randint(key, (n, 2), 0, 2 * pad + 1)
-    return jax.vmap(lambda frame, at: jax.lax.dynamic_slice(frame, (at[0], at[1], 0), (h, w, c)))(
-        padded, offsets)
-
-
 def ppo_loss(network, config: PPOConfig, params, batch):
     obs, action, old_logp, old_value, advantage, target = batch
     logits, value = network.apply(params, obs)
@@ -478,13 +421,6 @@ def check_checkpoint(payload: dict, path: Path) -> dict:
 
 # -- training -------------------------------------------------------------------------------------
 
-def _checked_checkpoint(config: PPOConfig, ckpt_path: Path, stop_after: int | None) -> dict:
-    """The checkpoint a resume continues: trained under ``config``, with all a run needs, and
-    not beyond ``stop_after``."""
-    return runs.resumable(load_checkpoint(ckpt_path), config, ckpt_path, RESUME_STATE,
-                          stop_after)
-
-
 def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool = True,
           stop_after: int | None = None) -> dict:
     """Train PPO; write ``out``/config.json, log.csv, episodes.csv, checkpoint.pkl and
@@ -497,23 +433,14 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
     finished run's summary.json if an interruption came before it)."""
     from tqdm import tqdm
 
-    made_with = software()  # before training, not whatever is installed when it ends
-    if stop_after is not None:
-        check_int("stop_after", stop_after, 1)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    ckpt_path, log_path, ep_path = out / "checkpoint.pkl", out / "log.csv", out / "episodes.csv"
-    last = config.num_iterations if stop_after is None else min(stop_after,
-                                                                config.num_iterations)
-    if not resume:
-        check_no_run_here(out, "ppo")
-    ckpt = _checked_checkpoint(config, ckpt_path, stop_after) if resume else None
-    if ckpt is not None and ckpt["iteration"] == last:  # nothing to train
+    run = runs.start_training(config, out, "ppo", resume=resume, stop_after=stop_after,
+                              load_checkpoint=load_checkpoint, resume_state=RESUME_STATE,
+                              log_fields=LOG_FIELDS, episode_fields=EPISODE_FIELDS)
+    out, ckpt, last, ckpt_path = run.out, run.ckpt, run.last, run.checkpoint
+    if run.nothing_to_train:
         parts = recorded_parts(ckpt)
-        summary = _summary(config, last, ckpt["elapsed_s"], parts[-1]["software"], parts)
-        if not (out / "summary.json").exists():  # an interruption came before it
-            write_summary(out, summary)
-        return dict(summary, iterations_now=0, agent_steps_now=0)
+        return run.untrained(_summary(config, last, ckpt["elapsed_s"], parts[-1]["software"],
+                                      parts))
     envs = make_envs(config)
     try:
         network = make_network(config, envs[0].num_actions)
@@ -524,12 +451,9 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
         if ckpt is not None:
             params, opt_state = ckpt["params"], ckpt["opt_state"]
             key, start, obs = ckpt["key"], ckpt["iteration"], list(ckpt["obs"])
-            parts = software_parts(ckpt, start, made_with, ckpt_path)
+            parts = run.resume_files(start * config.batch_size)
             for env, snap in zip(envs, ckpt["envs"]):
                 env.restore(snap)
-            step = start * config.batch_size
-            for path, fields in ((log_path, LOG_FIELDS), (ep_path, EPISODE_FIELDS)):
-                rewrite_csv(path, fields, rows_upto(path, fields, step))
             elapsed = ckpt["elapsed_s"]
         else:
             key = agent_key(config.seed)  # the env seeds 2*seed, 2*seed+1 draw their own chains
@@ -538,10 +462,7 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
             params = network.init(init_key, obs[0])
             opt_state = optimizer.init(params)
             start, elapsed = 0, 0.0
-            parts = [dict(from_iteration=0, software=made_with)]
-            (out / "config.json").write_text(json.dumps(dataclasses.asdict(config), indent=1))
-            rewrite_csv(log_path, LOG_FIELDS, [])
-            rewrite_csv(ep_path, EPISODE_FIELDS, [])
+            parts = run.begin_files(config)
         bar = tqdm(total=config.num_iterations * config.batch_size, initial=start
                    * config.batch_size, unit="step", disable=not progress,
                    desc=f"ppo {config.game} {config.preset} seed {config.seed}")
@@ -571,8 +492,8 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
                        lr=lr, sps=step / elapsed, rollout_sps=config.batch_size / (t1 - t0),
                        update_s=t2 - t1, **{k: float(v) for k, v in metrics.items()
                                             if k in LOG_FIELDS})
-            append_csv(log_path, [[row[f] for f in LOG_FIELDS]])
-            append_csv(ep_path, episodes)
+            append_csv(run.log, [[row[f] for f in LOG_FIELDS]])
+            append_csv(run.episodes, episodes)
             bar.update(config.batch_size)
             bar.set_postfix(ret=f"{np.mean(recent):.1f}" if recent else "-",
                             sps=f"{step / elapsed:.0f}")
@@ -586,7 +507,7 @@ def train(config: PPOConfig, out: Path, *, resume: bool = False, progress: bool 
     finally:
         for env in envs:
             env.close()
-    summary = _summary(config, last, elapsed, made_with, parts)
+    summary = _summary(config, last, elapsed, run.made_with, parts)
     write_summary(out, summary)
     return dict(summary, iterations_now=last - start,
                 agent_steps_now=(last - start) * config.batch_size)
@@ -630,10 +551,6 @@ def load_policy(checkpoint: Path, mode: str = "sampled"):
     """(config, policy(obs, key) -> (B,) int32 actions) of a checkpoint, acting ``sampled``
     (from its distribution) or ``greedy`` (argmax), jitted."""
     return policy_of(load_checkpoint(checkpoint), mode)
-
-
-# how far an evaluated checkpoint's run had trained, as an evaluation records it
-TRAINING_KEYS = ("trained_agent_steps", "run_total_steps", "run_finished")
 
 
 def progress_of(config: PPOConfig, agent_steps: int) -> dict:

@@ -6,12 +6,19 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import json
 import os
 import pickle
 import warnings
 from pathlib import Path
 
 import jax
+
+from stori_jax.checks import check_int
+from stori_jax.provenance import software
+
+# how far an evaluated checkpoint's run had trained, as an evaluation records it
+TRAINING_KEYS = ("trained_agent_steps", "run_total_steps", "run_finished")
 
 
 def save_checkpoint(path: Path, payload: dict) -> None:
@@ -127,6 +134,82 @@ def resumable(ckpt: dict, config, path: Path, resume_state, stop_after: int | No
     return ckpt
 
 
+@dataclasses.dataclass(frozen=True)
+class TrainStart:
+    """Where one ``train`` call starts (:func:`start_training`): the run folder ``out``, the
+    iteration it stops after (``last``), the checkpoint it resumes (``ckpt``; None: a fresh
+    run) and the software it starts with (``made_with``)."""
+
+    out: Path
+    last: int
+    ckpt: dict | None
+    made_with: dict
+    log_fields: tuple
+    episode_fields: tuple
+
+    @property
+    def checkpoint(self) -> Path:
+        return self.out / "checkpoint.pkl"
+
+    @property
+    def log(self) -> Path:
+        return self.out / "log.csv"
+
+    @property
+    def episodes(self) -> Path:
+        return self.out / "episodes.csv"
+
+    @property
+    def nothing_to_train(self) -> bool:
+        """A resume whose checkpoint has trained as far as this call would."""
+        return self.ckpt is not None and self.ckpt["iteration"] == self.last
+
+    def untrained(self, summary: dict) -> dict:
+        """The result of a call with nothing to train: ``summary`` (the run's, as recorded),
+        written to summary.json only if an interruption came before it; no other file."""
+        if not (self.out / "summary.json").exists():
+            write_summary(self.out, summary)
+        return dict(summary, iterations_now=0, agent_steps_now=0)
+
+    def begin_files(self, config) -> list:
+        """A fresh run's config.json and empty logs; its software parts."""
+        (self.out / "config.json").write_text(json.dumps(dataclasses.asdict(config), indent=1))
+        rewrite_csv(self.log, self.log_fields, [])
+        rewrite_csv(self.episodes, self.episode_fields, [])
+        return [dict(from_iteration=0, software=self.made_with)]
+
+    def resume_files(self, upto_step: int) -> list:
+        """A resumed run's logs cut back to its checkpoint (``upto_step``); its software parts,
+        this call's appended where it differs (:func:`software_parts`)."""
+        parts = software_parts(self.ckpt, self.ckpt["iteration"], self.made_with,
+                               self.checkpoint)
+        for path, fields in ((self.log, self.log_fields), (self.episodes, self.episode_fields)):
+            rewrite_csv(path, fields, rows_upto(path, fields, upto_step))
+        return parts
+
+
+def start_training(config, out: Path, agent: str, *, resume: bool, stop_after: int | None,
+                   load_checkpoint, resume_state, log_fields, episode_fields) -> TrainStart:
+    """The train / resume preamble of every agent: the software this call starts with (before
+    training, not whatever is installed when it ends), ``stop_after`` checked, ``out`` made,
+    a fresh run refused over another (:func:`check_no_run_here`), and on ``resume`` the
+    checkpoint ``load_checkpoint`` reads, checked :func:`resumable`."""
+    made_with = software()
+    if stop_after is not None:
+        check_int("stop_after", stop_after, 1)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    last = config.num_iterations if stop_after is None else min(stop_after,
+                                                                config.num_iterations)
+    if not resume:
+        check_no_run_here(out, agent)
+    path = out / "checkpoint.pkl"
+    ckpt = resumable(load_checkpoint(path), config, path, resume_state,
+                     stop_after) if resume else None
+    return TrainStart(out=out, last=last, ckpt=ckpt, made_with=made_with,
+                      log_fields=tuple(log_fields), episode_fields=tuple(episode_fields))
+
+
 def rewrite_csv(path: Path, fields, rows) -> None:
     with open(path, "w", newline="") as f:
         writer = csv.writer(f)
@@ -170,7 +253,7 @@ def software_parts(ckpt: dict, start: int, made_with: dict, path: Path) -> list:
                     if version != made_with["packages"].get(name)]
         warnings.warn(f"resuming from {path}: it was trained so far with other software "
                       f"({'; '.join(changed)}): from iteration {start} on, the run may not "
-                      "match an uninterrupted one bit for bit", stacklevel=3)
+                      "match an uninterrupted one bit for bit", stacklevel=4)
     return parts + [dict(from_iteration=start, software=made_with)]
 
 
@@ -202,8 +285,6 @@ def check_no_finished_run(out: Path, prefix: str = "",
 
 def write_summary(out: Path, summary: dict) -> None:
     """``out``/summary.json, once the run has finished (its table and evaluation read it)."""
-    import json
-
     if summary["finished"]:
         (Path(out) / "summary.json").write_text(json.dumps(summary, indent=1))
 
@@ -233,7 +314,7 @@ def cores() -> int:
     return min(allowed, budget)
 
 
-def worker_split(num_envs: int) -> dict:
+def workers_within_cores(num_envs: int) -> dict:
     """``stori_jax.make``'s ``num_workers`` and ``inline_envs`` for a batch of ``num_envs``
     under :func:`cores`: {} (make's own default, from the CPU affinity) unless
     ``STORI_JAX_CORES`` caps the cores, and then make's default rule on that many."""

@@ -195,7 +195,7 @@ def _training(result: dict, path: Path) -> dict | None:
     recorded it, or, for an older one, from the training run it lies in (its summary.json, or
     its config.json and the last global_step of its log.csv); None where nothing says, and for
     the random policy."""
-    from baselines.ppo import TRAINING_KEYS
+    from baselines.runs import TRAINING_KEYS
 
     def checked(values) -> dict | None:
         steps, total, finished = values

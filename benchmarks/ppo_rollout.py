@@ -3,7 +3,7 @@ random actions (no network), PPO's rollout with agent compute overlapping emulat
 half-batches stepped in turn, as baselines/ppo.py does), the same rollout without overlap (one
 batch on as many emulator workers as the two halves have: choose, then step), and the jitted
 update, with the game's evidence hyperparameters
-(``GAME_HYPERPARAMETERS`` in baselines/run_evidence.py).  Writes JSON, a markdown table and a PNG.
+(``GAME_HYPERPARAMETERS`` in baselines/evidence/run_evidence.py).  Writes JSON, a markdown table and a PNG.
 
     python benchmarks/ppo_rollout.py [--game Breakout] [--preset 3.1] [--network nips] [--repeats 3] [--out DIR]
 """
@@ -21,8 +21,9 @@ import numpy as np
 
 import stori_jax
 from baselines import ppo
+from baselines.networks import NETWORKS
 from stori_jax.provenance import software
-from baselines.run_evidence import EVIDENCE_HYPERPARAMETERS, GAME_HYPERPARAMETERS
+from baselines.evidence.run_evidence import EVIDENCE_HYPERPARAMETERS, GAME_HYPERPARAMETERS
 from _checks import (options_in_name, output_directory, require_at_least_one,  # on sys.path
                      stori_game_and_preset)
 
@@ -138,7 +139,7 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--game", default="Breakout")
     parser.add_argument("--preset", default="3.1")
-    parser.add_argument("--network", default="nips", choices=list(ppo.NETWORKS))
+    parser.add_argument("--network", default="nips", choices=list(NETWORKS))
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--out", type=Path, default=RESULTS, help="directory for the results")
     args = parser.parse_args(argv)

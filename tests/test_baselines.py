@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 import stori_jax
-from baselines import ppo, runs
+from baselines import networks, ppo, runs
 from baselines.evaluate import evaluate, write_result
 from baselines.table import (PAPER_RESULTS, STD_OVER_SEEDS, aggregate, build_table, learning_curves,
                              load_evaluations, markdown, smoothed)
@@ -48,7 +48,7 @@ def random_frames(n, seed=0):
                                                          (64, 3, 1, 9)])
 def test_conv_is_the_usual_convolution(features, kernel, stride, size):
     x = np.random.default_rng(0).uniform(size=(2, size, size, 5)).astype(np.float32)
-    conv = ppo.Conv(features, kernel, stride)
+    conv = networks.Conv(features, kernel, stride)
     params = jax.jit(conv.init)(jax.random.PRNGKey(1), x)
     dense = params["params"]["Dense_0"]
     k = kernel // stride
@@ -138,7 +138,7 @@ def test_an_update_lowers_the_loss_on_a_fixed_batch(augment_shift, game, action_
 def test_random_shift_crops_the_edge_padded_frames_at_offsets_within_the_pad():
     pad = 3
     obs = jnp.asarray(random_frames(32))
-    shifted = np.asarray(ppo.random_shift(obs, jax.random.PRNGKey(1), pad))
+    shifted = np.asarray(networks.random_shift(obs, jax.random.PRNGKey(1), pad))
     assert shifted.shape == obs.shape and shifted.dtype == np.uint8
     padded = np.pad(np.asarray(obs), ((0, 0), (pad, pad), (pad, pad), (0, 0)), mode="edge")
     offsets = []
@@ -148,8 +148,8 @@ def test_random_shift_crops_the_edge_padded_frames_at_offsets_within_the_pad():
         assert len(found) == 1, "every output is one crop of its own padded frame stack"
         offsets.append(found[0])
     assert len(set(offsets)) > 10, "each sample draws its own offset"
-    np.testing.assert_array_equal(ppo.random_shift(obs, jax.random.PRNGKey(1), pad), shifted)
-    np.testing.assert_array_equal(ppo.random_shift(obs, jax.random.PRNGKey(1), 0), obs)
+    np.testing.assert_array_equal(networks.random_shift(obs, jax.random.PRNGKey(1), pad), shifted)
+    np.testing.assert_array_equal(networks.random_shift(obs, jax.random.PRNGKey(1), 0), obs)
 
 
 @pytest.mark.parametrize("field, value, message", [
@@ -513,7 +513,7 @@ def test_a_resumed_run_records_each_parts_software_and_warns_when_it_changed(
         ppo.train(tiny(), tmp_path, progress=False, stop_after=2, resume=True)
     first = provenance.software()
     later = dict(first, commit="0" * 40, packages=dict(first["packages"], jax="9.9"))
-    monkeypatch.setattr(ppo, "software", lambda: later)
+    monkeypatch.setattr(runs, "software", lambda: later)
     with pytest.warns(UserWarning, match=r"other software \(commit \S+ -> '0{40}'; "
                       r"jax '[^']+' -> '9\.9'\): from iteration 2 on"):
         ppo.train(tiny(), tmp_path, progress=False, resume=True)
@@ -547,7 +547,7 @@ def test_resuming_a_finished_run_touches_no_file(uninterrupted, monkeypatch):
     full, summary = uninterrupted
     files = {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in full.iterdir()}
     later = dict(summary["software"], commit="0" * 40)
-    monkeypatch.setattr(ppo, "software", lambda: later)
+    monkeypatch.setattr(runs, "software", lambda: later)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         again = ppo.train(tiny(), full, progress=False, resume=True)
@@ -572,7 +572,7 @@ def test_resuming_a_run_stopped_before_its_summary_writes_it(uninterrupted, tmp_
 @pytest.fixture(scope="module")
 def staged_once(tmp_path_factory):
     """run_long.py's stages (1 and 2) of the tiny run (trained once per module)."""
-    from baselines import run_long
+    from baselines.evidence import run_long
 
     root = tmp_path_factory.mktemp("staged")
     run, by_step = root / "run", root / "by-step"
@@ -608,7 +608,7 @@ def test_a_run_trained_in_stages_is_the_uninterrupted_run_with_each_stage_evalua
     """The run ends as the uninterrupted one; each stage's checkpoint is the one a run stopped
     there holds, evaluated with its own progress; a second call trains and evaluates
     nothing."""
-    from baselines import run_long
+    from baselines.evidence import run_long
 
     full, _ = uninterrupted
     run, by_step = staged_once
@@ -637,7 +637,7 @@ def test_stages_resume_where_an_interruption_left_them(uninterrupted, staged, tm
                                                        monkeypatch):
     """Stopped at any point, the script does only what is left: a stage trained but not
     copied aside, a copy not evaluated, a run trained but without its summary."""
-    from baselines import run_long
+    from baselines.evidence import run_long
 
     full, _ = uninterrupted
     run, by_step = staged
@@ -664,7 +664,7 @@ def test_stages_refuse_what_they_cannot_resume(staged, tmp_path):
     """A run trained past a stage whose checkpoint is missing, a run without its checkpoint
     (a fresh clone's: checkpoints are not committed) and bad stages are refused by name;
     the run's files are left as they were."""
-    from baselines import run_long
+    from baselines.evidence import run_long
 
     run, by_step = staged
     log = (run / "log.csv").read_text()
@@ -696,7 +696,7 @@ def test_the_onset_table_lists_each_stages_evaluations_by_seed(tmp_path, monkeyp
     """run_long.py's onset.md: a row per agent steps (from each evaluation's own record, not
     its folder), each seed's mean ± episode std, the mean ± std of the seed means (saying how
     many seeds where some are missing), the random policy's row."""
-    from baselines import run_long
+    from baselines.evidence import run_long
 
     long_evaluation(tmp_path, "runs/seed0", 0, 3000, [4.0, 6.0])
     long_evaluation(tmp_path, "runs/seed7", 7, 3000, [1.0, 3.0])
@@ -721,8 +721,8 @@ def test_the_onset_table_lists_each_stages_evaluations_by_seed(tmp_path, monkeyp
 
 
 def test_the_random_policys_boxing_evaluations_are_the_recorded_ones():
-    from baselines import run_long
-    from baselines.run_evidence import run_dir
+    from baselines.evidence import run_long
+    from baselines.evidence.run_evidence import run_dir
 
     found = run_long.random_evaluations(run_long.SEEDS)
     assert sorted(found) == list(run_long.SEEDS)
@@ -742,7 +742,7 @@ def test_the_random_policys_boxing_evaluations_are_the_recorded_ones():
     ("short", dict(run_total_steps=100_000), r"run_total_steps is 100000, not 1000000"),
 ])
 def test_the_onset_refuses_evaluations_it_cannot_place(tmp_path, where, fields, match):
-    from baselines import run_long
+    from baselines.evidence import run_long
 
     with pytest.raises(ValueError, match=r"no evaluations below .*: run the script first"):
         run_long.write_onset(tmp_path)
@@ -1576,7 +1576,7 @@ def test_cli_errors_are_clear(argv, match, capsys):
     (["--only", "Pong-3.1"], "unknown runs ['Pong-3.1']"),
 ])
 def test_run_evidence_names_bad_runs_and_seeds(argv, match, monkeypatch, capsys):
-    from baselines import run_evidence
+    from baselines.evidence import run_evidence
 
     monkeypatch.setattr("sys.argv", ["run_evidence.py", "--stage", "table", *argv])
     with pytest.raises(SystemExit) as exit_info:

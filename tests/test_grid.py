@@ -13,18 +13,25 @@ import os
 import pickle
 import shutil
 import signal
+import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from baselines import grid
 from baselines.commands import run_dir
+from baselines.grid import cluster
+from baselines.grid.cli import report_outcome
+from baselines.grid.spec import SPEC_FILE, grid_spec
+from baselines.grid.trial import (archive_run, part_bounds, progress, restore_run,
+                                  reusable_result, trained_iterations)
 from stori_jax.cli import main
 
 ray = pytest.importorskip("ray", reason="the grid runs on Ray Tune (pip install -e '.[ray]')")
 tune = pytest.importorskip("ray.tune")
+from baselines.grid.tuning import TUNE_DIR, run_grid  # noqa: E402 (imports Ray)
 
 # the Mnih-2013 torso: its update is large enough for XLA's OpenMP-threaded kernels, whose
 # rounding changes with OMP_NUM_THREADS (Ray sets it in its workers; the grid undoes that)
@@ -35,8 +42,8 @@ EVAL = ["--eval-episodes", "1", "--max-episode-frames", "400"]  # episodes cut a
 
 @pytest.fixture(scope="module")
 def local_ray():
-    """The grid's own local Ray (grid.connect(None)), two CPUs, for the module."""
-    assert grid.connect(None), "a Ray was already running in this process"
+    """The grid's own local Ray (cluster.connect(None)), two CPUs, for the module."""
+    assert cluster.connect(None), "a Ray was already running in this process"
     yield
     ray.shutdown()
 
@@ -84,7 +91,7 @@ def test_a_grid_ends_with_the_complete_table_and_running_it_again_runs_nothing(
     assert [(r["game"], r["preset"], r["Random"]["seeds"]) for r in table["rows"]] == [
         ("Breakout", "1", [0, 7]), ("Breakout", "3.1", [0, 7])]
     assert (out / "table.md").exists()
-    assert json.loads((out / grid.SPEC_FILE).read_text())["runs"] == [
+    assert json.loads((out / SPEC_FILE).read_text())["runs"] == [
         ["Breakout", "1", 0], ["Breakout", "1", 7], ["Breakout", "3.1", 0], ["Breakout", "3.1", 7]]
     # each trial's file is where `stori-jax eval --random` files it, and what eval gives alone
     from baselines.evaluate import evaluate
@@ -99,7 +106,7 @@ def test_a_grid_ends_with_the_complete_table_and_running_it_again_runs_nothing(
     # the same command again: Tune restores the experiment, and no trial runs
     evals = sorted(out.rglob("eval-random.json"))
     before = {p: p.stat().st_mtime_ns for p in evals}
-    results = sorted((out / grid.TUNE_DIR).rglob("result.json"))
+    results = sorted((out / TUNE_DIR).rglob("result.json"))
     reported = {p: p.read_text() for p in results}
     capsys.readouterr()
     assert main(argv) == 0
@@ -141,11 +148,11 @@ def test_a_bad_set_fails_its_own_trials_and_a_killed_trial_resumes_bit_identical
     Boxing's is killed after its first part, resumes from its Tune checkpoint, and ends with
     the files `stori-jax train` + `eval` give alone."""
     out = tmp_path / "grid"
-    spec = grid.grid_spec("ppo", games=["Breakout", "Boxing"], presets=["1"], seeds=[0],
+    spec = grid_spec("ppo", games=["Breakout", "Boxing"], presets=["1"], seeds=[0],
                           steps=STEPS, eval_episodes=1, max_episode_frames=400,
                           overrides=SMALL + ["action_head=factored"], parts=2)
     killer = KillOnce()
-    outcome = grid.run_grid(spec, out, max_failures=2, progress_bar=False, callbacks=[killer])
+    outcome = run_grid(spec, out, max_failures=2, progress_bar=False, callbacks=[killer])
 
     assert list(outcome.finished) == ["Boxing 1 seed 0"]
     assert outcome.failed == {
@@ -153,7 +160,7 @@ def test_a_bad_set_fails_its_own_trials_and_a_killed_trial_resumes_bit_identical
                              "full 18 actions (e.g. Boxing, BankHeist); Breakout has 4: use "
                              "action_head='joint'"}
     assert not run_dir(out, "Breakout", "1", "ppo", 0).exists()  # never started
-    assert grid.report_outcome(outcome, spec, out) == 1
+    assert report_outcome(outcome, spec, out) == 1
     err = capsys.readouterr().err
     assert err.count("action_head='factored' needs a game") == 2  # before Ray, and the summary
     assert json.loads((out / "table.json").read_text())["rows"][0]["PPO"]["seeds"] == [0]
@@ -198,14 +205,14 @@ def test_without_ray_the_command_says_how_to_install_it(monkeypatch, tmp_path, c
 ])
 def test_what_cannot_run_is_refused_before_ray_starts(argv, message, tmp_path, capsys,
                                                       monkeypatch):
-    monkeypatch.setattr(grid, "connect", lambda address: pytest.fail("Ray started"))
+    monkeypatch.setattr(cluster, "connect", lambda address: pytest.fail("Ray started"))
     assert main(["grid", *argv, "--out", str(tmp_path / "g"), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert message in err and err.count("stori-jax: error") == 1
 
 
 def test_a_folder_that_is_no_grid_is_refused(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(grid, "connect", lambda address: pytest.fail("Ray started"))
+    monkeypatch.setattr(cluster, "connect", lambda address: pytest.fail("Ray started"))
     (tmp_path / "Breakout-1").mkdir()
     assert main(["grid", "--agent", "random", "--out", str(tmp_path), "--quiet"]) == 2
     assert "holds files but no grid.json: not a grid's folder" in capsys.readouterr().err
@@ -214,10 +221,10 @@ def test_a_folder_that_is_no_grid_is_refused(tmp_path, capsys, monkeypatch):
 # -- the pieces -------------------------------------------------------------------------------
 
 def test_parts_are_whole_iterations_as_even_as_they_go():
-    assert grid.part_bounds(98, 4) == [25, 49, 74, 98]
-    assert grid.part_bounds(3, 3) == [1, 2, 3]
-    assert grid.part_bounds(2, 4) == [1, 2]  # no more parts than iterations
-    assert grid.progress(49, [25, 49, 74, 98]) == 2 / 5
+    assert part_bounds(98, 4) == [25, 49, 74, 98]
+    assert part_bounds(3, 3) == [1, 2, 3]
+    assert part_bounds(2, 4) == [1, 2]  # no more parts than iterations
+    assert progress(49, [25, 49, 74, 98]) == 2 / 5
 
 
 def test_a_run_folder_behind_its_tune_checkpoint_is_restored_from_it(tmp_path):
@@ -234,19 +241,19 @@ def test_a_run_folder_behind_its_tune_checkpoint_is_restored_from_it(tmp_path):
     (run / "log.csv").write_text("global_step\n32\n64\n")
     saved = tmp_path / "ckpt"
     saved.mkdir()
-    grid.archive_run(run, saved, agent_steps=64, per_iteration=32)
+    archive_run(run, saved, agent_steps=64, per_iteration=32)
     files = {p.name: p.read_bytes() for p in run.iterdir()}
-    assert not grid.restore_run(run, saved, agent)  # as far: kept
+    assert not restore_run(run, saved, agent)  # as far: kept
     shutil.rmtree(run)  # the folder is lost: rebuilt from the archive
-    assert grid.restore_run(run, saved, agent)
+    assert restore_run(run, saved, agent)
     assert {p.name: p.read_bytes() for p in run.iterdir()} == files
     save_checkpoint(run / "checkpoint.pkl", dict(format="fake", steps=32))  # behind
-    assert grid.trained_iterations(run, agent, 32) == 1
-    assert grid.restore_run(run, saved, agent)
-    assert grid.trained_iterations(run, agent, 32) == 2
+    assert trained_iterations(run, agent, 32) == 1
+    assert restore_run(run, saved, agent)
+    assert trained_iterations(run, agent, 32) == 2
     (run / "checkpoint.pkl").write_bytes(b"junk")  # a damaged checkpoint is replaced too
-    assert grid.trained_iterations(run, agent, 32) == -1
-    assert grid.restore_run(run, saved, agent)
+    assert trained_iterations(run, agent, 32) == -1
+    assert restore_run(run, saved, agent)
     assert {p.name: p.read_bytes() for p in run.iterdir()} == files
 
 
@@ -254,10 +261,10 @@ def test_the_cores_of_a_trial_cap_its_emulator_workers(monkeypatch):
     from baselines import ppo, runs
 
     monkeypatch.delenv(runs.CORES_VARIABLE, raising=False)
-    assert runs.worker_split(20) == {}  # make's own default
+    assert runs.workers_within_cores(20) == {}  # make's own default
     monkeypatch.setenv(runs.CORES_VARIABLE, "1")
     assert runs.cores() == 1
-    assert runs.worker_split(20) == dict(num_workers=1, inline_envs=0)
+    assert runs.workers_within_cores(20) == dict(num_workers=1, inline_envs=0)
     assert ppo.workers_per_half(8) == 1
     monkeypatch.setenv(runs.CORES_VARIABLE, "10000")  # never more than the affinity allows
     assert runs.cores() == len(os.sched_getaffinity(0))
@@ -270,15 +277,15 @@ def test_an_evaluation_already_there_is_reused_only_if_it_is_the_one_asked_for(t
     path = tmp_path / "eval-random.json"
     wanted = dict(game="Breakout", preset="1", policy="random", train_seed=0, episodes=2,
                   max_episode_frames=400)
-    assert grid.reusable_result(path, wanted, None) is None
+    assert reusable_result(path, wanted, None) is None
     path.write_text(json.dumps(dict(wanted, mean_return=1.0)))
-    assert grid.reusable_result(path, wanted, None)["mean_return"] == 1.0
+    assert reusable_result(path, wanted, None)["mean_return"] == 1.0
     with pytest.raises(ValueError, match=r"holds another evaluation \(episodes 2 there, 5 "
                                          r"here\): move it away"):
-        grid.reusable_result(path, dict(wanted, episodes=5), None)
+        reusable_result(path, dict(wanted, episodes=5), None)
 
 
-# -- the recorded evidence (baselines/run_grid_evidence.py) -----------------------------------
+# -- the recorded evidence (baselines/evidence/run_grid_evidence.py) -----------------------------------
 
 RECORDED = sorted((Path(__file__).resolve().parents[1] / "baselines" / "results").glob("grid-*"))
 
@@ -288,14 +295,14 @@ def test_a_recorded_grid_is_complete_its_own_table_and_the_serial_runs_twin(fold
     """Each recorded grid holds an evaluation of every run its grid.json lists (made with the
     evidence script's settings), its table is what they give, and the timing file says every
     run came out identical to the same run made serially."""
-    from baselines.run_grid_evidence import GRIDS
+    from baselines.evidence.run_grid_evidence import GRIDS
     from baselines.table import aggregate, load_evaluations
 
     timing = json.loads((folder / "timing.json").read_text())
     assert set(timing) == set(GRIDS)
     for name, record in timing.items():
         out = folder / name
-        spec = json.loads((out / grid.SPEC_FILE).read_text())
+        spec = json.loads((out / SPEC_FILE).read_text())
         settings = GRIDS[name]
         assert (spec["agent"], spec["steps"], spec["eval_episodes"], spec["overrides"]) == (
             settings["agent"], settings["steps"], settings["eval_episodes"],
@@ -309,3 +316,18 @@ def test_a_recorded_grid_is_complete_its_own_table_and_the_serial_runs_twin(fold
         assert record["grid_equals_serial"] == dict(runs=runs, identical=runs, differ=[])
         assert record["speedup"] == pytest.approx(record["serial"]["seconds"]
                                                   / record["grid"]["seconds"])
+
+
+def test_an_address_where_nothing_listens_is_an_error_that_names_it(tmp_path):
+    """--address 127.0.0.1:1 (nothing there) printed Ray's 'Failed to connect to GCS' for
+    minutes; now the command stops at once, naming the address, and writes nothing."""
+    out = tmp_path / "g"
+    argv = [sys.executable, "-m", "stori_jax.cli", "grid", "--agent", "random", "--games",
+            "Breakout", "--presets", "1", "--seeds", "0", "--eval-episodes", "1",
+            "--address", "127.0.0.1:1", "--out", str(out), "--quiet"]
+    started = time.monotonic()
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=120)
+    assert time.monotonic() - started < 30
+    assert done.returncode == 2
+    assert "--address 127.0.0.1:1: nothing accepts connections at 127.0.0.1:1" in done.stderr
+    assert "Failed to connect to GCS" not in done.stderr and not out.exists()

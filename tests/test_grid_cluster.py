@@ -10,12 +10,14 @@ import json
 
 import pytest
 
-from baselines import grid
 from baselines.commands import run_dir
+from baselines.grid.spec import grid_spec
 
 ray = pytest.importorskip("ray", reason="the grid runs on Ray Tune (pip install -e '.[ray]')")
 tune = pytest.importorskip("ray.tune")
 from ray.cluster_utils import Cluster  # noqa: E402
+
+from baselines.grid.tuning import run_grid  # noqa: E402 (imports Ray)
 
 TINY = ["network=tiny", "num_envs=4", "num_steps=8", "num_minibatches=2", "update_epochs=1"]
 PER_ITERATION = 32  # agent steps: 4 envs x 8 steps
@@ -64,11 +66,11 @@ class KillANode(tune.Callback):
 @pytest.mark.slow
 def test_trials_spread_over_the_nodes_and_a_lost_node_loses_nothing(cluster, tmp_path):
     made, workers = cluster
-    spec = grid.grid_spec("ppo", games=["Breakout"], presets=["1", "3.1"], seeds=[0],
+    spec = grid_spec("ppo", games=["Breakout"], presets=["1", "3.1"], seeds=[0],
                           steps=2 * PER_ITERATION, eval_episodes=1, max_episode_frames=400,
                           overrides=TINY, parts=2)
     killer = KillANode(made, workers)
-    outcome = grid.run_grid(spec, tmp_path, address=made.address, max_failures=2,
+    outcome = run_grid(spec, tmp_path, address=made.address, max_failures=2,
                             progress_bar=False, callbacks=[killer])
     assert sorted(outcome.finished) == ["Breakout 1 seed 0", "Breakout 3.1 seed 0"]
     assert not outcome.failed and not outcome.unfinished

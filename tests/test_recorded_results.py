@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from baselines.run_evidence import RESULTS as BASELINE_RESULTS
+from baselines.evidence.run_evidence import RESULTS as BASELINE_RESULTS
 
 ROOT = Path(__file__).resolve().parents[1]
 BENCHMARK_RESULTS = ROOT / "benchmarks" / "results"
@@ -19,14 +19,14 @@ PPO_FILES = ("config.json", "log.csv", "episodes.csv", "summary.json", "eval-sam
 
 
 def evidence_runs():
-    from baselines.run_evidence import RUNS, SEEDS
+    from baselines.evidence.run_evidence import RUNS, SEEDS
 
     return [(game, preset, seed) for game, preset in RUNS for seed in SEEDS]
 
 
 @pytest.mark.parametrize("game, preset, seed", evidence_runs())
 def test_every_evidence_run_is_recorded(game, preset, seed):
-    from baselines.run_evidence import run_dir
+    from baselines.evidence.run_evidence import run_dir
 
     ppo = run_dir(game, preset, "ppo", seed)
     missing = [name for name in PPO_FILES if not (ppo / name).is_file()]
@@ -37,7 +37,7 @@ def test_every_evidence_run_is_recorded(game, preset, seed):
 @pytest.mark.parametrize("game, preset, seed", evidence_runs())
 def test_every_evidence_run_used_the_recorded_hyperparameters(game, preset, seed):
     from baselines.ppo import PPOConfig
-    from baselines.run_evidence import EVAL_EPISODES, GAME_HYPERPARAMETERS, run_dir
+    from baselines.evidence.run_evidence import EVAL_EPISODES, GAME_HYPERPARAMETERS, run_dir
 
     recorded = json.loads((run_dir(game, preset, "ppo", seed) / "config.json").read_text())
     expected = PPOConfig(game=game, preset=preset, seed=seed, **GAME_HYPERPARAMETERS[game])
@@ -57,7 +57,7 @@ def test_the_committed_table_is_what_the_recorded_evaluations_give():
 
 def test_the_million_step_runs_used_run_longs_config_and_every_stage_is_evaluated():
     from baselines.ppo import PPOConfig
-    from baselines.run_long import OUT, SEEDS, STAGES, long_config
+    from baselines.evidence.run_long import OUT, SEEDS, STAGES, long_config
 
     runs = {int(run.name.removeprefix("seed")): run for run in (OUT / "runs").glob("seed*")}
     assert sorted(runs) == sorted(SEEDS)
@@ -73,7 +73,7 @@ def test_the_million_step_runs_used_run_longs_config_and_every_stage_is_evaluate
 
 
 def test_the_committed_onset_and_table_of_the_million_step_runs_are_what_they_give():
-    from baselines.run_long import (OUT, SEEDS, evaluations_by_step, onset_table,
+    from baselines.evidence.run_long import (OUT, SEEDS, evaluations_by_step, onset_table,
                                     random_evaluations)
     from baselines.table import STD_OVER_SEEDS, aggregate, load_evaluations, markdown
 
@@ -99,7 +99,7 @@ def test_a_recorded_random_evaluation_replays_from_its_seed():
     the jax and ale-py versions that recorded it (other versions may draw or emulate otherwise:
     docs/reproducibility.md)."""
     from baselines.evaluate import evaluate
-    from baselines.run_evidence import run_dir
+    from baselines.evidence.run_evidence import run_dir
     from stori_jax.suite import episode_quotas
 
     recorded = json.loads((run_dir("Breakout", "1", "random", 0) / "eval-random.json")
@@ -165,7 +165,7 @@ def _replay_first_iterations(recorded_run: Path, iterations: int, out: Path) -> 
 def test_a_recorded_ppo_run_replays_its_first_iterations_from_its_seed(tmp_path):
     """The recorded PPO runs are this code's: Breakout 3.1 seed 0, trained again for four
     iterations from its recorded config, logs the same 16 episodes and the same losses."""
-    from baselines.run_evidence import run_dir
+    from baselines.evidence.run_evidence import run_dir
 
     episodes = _replay_first_iterations(run_dir("Breakout", "3.1", "ppo", 0), 4, tmp_path)
     assert len(episodes) == 16
@@ -178,7 +178,7 @@ def test_a_recorded_million_step_run_replays_its_first_iteration_from_its_seed(t
     Boxing episode ends in its 128 steps per env).  One iteration: on another CPU the second
     already drifts by percents (its rollout acts with a policy whose update's clipping the
     first one's rounding moved: clipfrac 0.0154 against 0.0183 on an AMD EPYC)."""
-    from baselines.run_long import OUT
+    from baselines.evidence.run_long import OUT
 
     assert _replay_first_iterations(OUT / "runs" / "seed0", 1, tmp_path) == []
 
@@ -197,7 +197,7 @@ def test_the_readme_shows_the_committed_table():
 
 
 def test_the_million_step_readme_shows_the_committed_onset():
-    from baselines.run_long import OUT
+    from baselines.evidence.run_long import OUT
 
     assert _rows_missing_from(OUT / "README.md", OUT / "onset.md") == []
 

@@ -7,7 +7,7 @@ the run with a checkpoint, as an interruption would, and the next resumes it exa
 had never stopped, so the script can be stopped and started again (on this 2-core CPU a seed
 takes about an hour, and each evaluation about two minutes).
 
-    python baselines/run_long.py [--seeds 0 7 13] [--out DIR]
+    python baselines/evidence/run_long.py [--seeds 0 7 13] [--out DIR]
 
 Writes DIR/runs/seed<S>/ (config, logs, summary, eval-sampled.json; checkpoint.pkl is not
 committed), DIR/by-step/<agent steps>/seed<S>/eval-sampled.json, DIR/onset.md and onset.png (the
@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from baselines.run_evidence import EVAL_EPISODES, RESULTS, results_name
+from baselines.evidence.run_evidence import EVAL_EPISODES, RESULTS, results_name
 
 OUT = RESULTS / "boxing-1M"
 REPOSITORY = RESULTS.parents[1]  # checkpoints are named from here, as in boxing-probes/
@@ -60,8 +60,9 @@ def evaluate_once(config, checkpoint: Path, out_dir: Path, *, episodes: int, num
 def _iterations_done(run: Path) -> int:
     """How far the run in ``run`` has trained: its checkpoint's iteration (0 for no run, or
     one stopped before its first checkpoint, which starts again).  A finished run whose
-    checkpoint is gone is refused (:func:`baselines.ppo.check_no_finished_run`)."""
-    from baselines.ppo import check_no_finished_run, load_checkpoint
+    checkpoint is gone is refused (:func:`baselines.runs.check_no_finished_run`)."""
+    from baselines.ppo import load_checkpoint
+    from baselines.runs import check_no_finished_run
 
     if (run / "checkpoint.pkl").exists():
         return load_checkpoint(run / "checkpoint.pkl")["iteration"]
@@ -139,7 +140,7 @@ def evaluations_by_step(out: Path) -> dict[int, dict[int, dict]]:
 
 def random_evaluations(seeds) -> dict[int, dict]:
     """The random policy's recorded evaluations on Boxing 3.1 (run_evidence.py's), by seed."""
-    from baselines.run_evidence import run_dir
+    from baselines.evidence.run_evidence import run_dir
 
     found = {}
     for seed in seeds:

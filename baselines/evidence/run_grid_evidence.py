@@ -1,6 +1,6 @@
 """The evidence behind ``stori-jax grid`` (baselines/results/grid-<date>/): two real grids on
 this machine, each timed as the grid command and as the same trials run serially, one after
-another in one process with the same code (:func:`baselines.grid.play_trial`, as ``stori-jax
+another in one process with the same code (:func:`baselines.grid.trial.play_trial`, as ``stori-jax
 train`` + ``eval`` alone would run them), and the two compared file by file.
 
 - ``random``: the random policy on all 24 paper presets x seeds 0, 7, 13, 5 evaluation
@@ -10,7 +10,7 @@ train`` + ``eval`` alone would run them), and the two compared file by file.
   runs' Breakout settings, ``network=nips num_envs=16 num_steps=64 update_epochs=2
   num_minibatches=8``), trained in 2 parts, 10 evaluation episodes.
 
-    python baselines/run_grid_evidence.py [--only random ppo] [--work DIR] [--date YYYY-MM-DD]
+    python baselines/evidence/run_grid_evidence.py [--only random ppo] [--work DIR] [--date YYYY-MM-DD]
 
 The machine's load (1-minute load average, sampled every 5 s) is recorded beside each time:
 other work on the same cores slows either run.  The grid's outputs (tables, curves, the
@@ -31,7 +31,7 @@ import threading
 import time
 from pathlib import Path
 
-RESULTS = Path(__file__).resolve().parent / "results"
+RESULTS = Path(__file__).resolve().parents[1] / "results"
 GRIDS = {
     "random": dict(agent="random", games=None, presets=None, seeds=(0, 7, 13), steps=None,
                    eval_episodes=5, overrides=(), parts=4),
@@ -108,7 +108,8 @@ def run_grid_command(name: str, out: Path) -> dict:
 def run_serial(name: str, out: Path) -> dict:
     """The same trials one after another in this process: :func:`play_trial`, the trial's
     code without Ray, each as ``stori-jax train`` + ``eval`` alone would run it (every core)."""
-    from baselines.grid import grid_spec, play_trial, trial_config
+    from baselines.grid.spec import grid_spec, trial_config
+    from baselines.grid.trial import play_trial
 
     g = GRIDS[name]
     spec = grid_spec(g["agent"], games=g["games"], presets=g["presets"], seeds=g["seeds"],

@@ -3,7 +3,7 @@ and Boxing under 3.1 and two perturbed presets each, then the paper's evaluation
 (100 episodes, eval seeds apart from training seeds) for PPO and the random policy, and the
 table.  Runs already finished are skipped, so the script can be stopped and started again.
 
-    python baselines/run_evidence.py [--stage train|eval|table|all] [--only Boxing-3.1 ...]
+    python baselines/evidence/run_evidence.py [--stage train|eval|table|all] [--only Boxing-3.1 ...]
                                      [--seeds 0 7 13]
 """
 
@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-RESULTS = Path(__file__).resolve().parent / "results"
+RESULTS = Path(__file__).resolve().parents[1] / "results"
 RUNS = [("Breakout", "3.1"), ("Breakout", "1"), ("Breakout", "3.2C"),
         ("Boxing", "3.1"), ("Boxing", "1"), ("Boxing", "3.2B")]
 SEEDS = (0, 7, 13)

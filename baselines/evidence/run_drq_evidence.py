@@ -4,7 +4,7 @@ paper's protocol (100 episodes on seeds apart from training), with its training 
 the speed of stepping the same envs without learning.  Runs already finished are skipped, so
 the script can be stopped and started again (a stopped run resumes from its checkpoint).
 
-    python baselines/run_drq_evidence.py [--only Boxing-3.1 ...] [--seeds 0 7 13]
+    python baselines/evidence/run_drq_evidence.py [--only Boxing-3.1 ...] [--seeds 0 7 13]
 
 On this 2-core CPU a run at DrQ(ε)'s replay ratio 1 takes hours (the update is ~95% of it), so
 the recorded runs use EVIDENCE_SETTINGS (stated in the table's notes and baselines/README.md).
@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from baselines.run_evidence import RESULTS, run_dir
+from baselines.evidence.run_evidence import RESULTS, run_dir
 
 # (game, preset, seeds)
 RUNS = [("Boxing", "3.1", (0, 7, 13)), ("Breakout", "3.1", (0, 7, 13)),
