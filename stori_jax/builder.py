@@ -17,7 +17,7 @@ from stori_jax.config import GRANULARITIES, Config
 from stori_jax.fork_guard import refuse_if_forked_after_jax
 from stori_jax.games import get_game
 from stori_jax.pixels import OBSERVATION_LAYOUTS
-from stori_jax.plan import OBS_KINDS, Plan, compile_plan
+from stori_jax.plan import OBS_KINDS, SCREENLESS_OBS, Plan, compile_plan
 from stori_jax.presets import preset as get_preset
 
 BACKENDS = ("subproc", "envpool")
@@ -70,11 +70,12 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
     settings = check_settings(num_envs=num_envs, seed=seed, autoreset=autoreset,
                               frame_skip=frame_skip, max_episode_frames=max_episode_frames,
                               noop_max=noop_max)
-    obs = resolve_obs(cfg, obs)
+    obs = resolve_obs(cfg, obs, spec.name)
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
     if backend == "subproc":
-        check_memory(num_envs, frame_skip, screens=obs != "ram", final=bool(autoreset))
+        check_memory(num_envs, frame_skip, screens=obs not in SCREENLESS_OBS,
+                     final=bool(autoreset))
     else:  # envpool's buffers hold a screen per env whatever obs is
         check_memory(num_envs, frame_skip, buffers="envpool's frame buffers")
     plan = compile_plan(cfg, spec, num_envs=settings["num_envs"], frame_skip=frame_skip,
@@ -159,21 +160,25 @@ def check_settings(*, num_envs, seed, autoreset, frame_skip, max_episode_frames,
                 noop_max=check_int("noop_max", noop_max, 0, MAX_INT32 - 1))
 
 
-def resolve_obs(cfg: Config, obs: str | None) -> str:
+def resolve_obs(cfg: Config, obs: str | None, game: str | None = None) -> str:
     """The observation kind: the default for ``cfg`` (``ram`` for type 0, else ``atari84``),
-    or ``obs`` checked against what ``cfg`` can show."""
+    or ``obs`` checked against what ``cfg`` (and ``game``) can show."""
     if obs is None:
         return "ram" if cfg.ram_observation else "atari84"
     if obs not in OBS_KINDS:
         raise ValueError(f"obs must be one of {list(OBS_KINDS)}, got {obs!r}")
-    if cfg.ram_observation and obs != "ram":
-        raise ValueError(f"type 0 (ram_observation) observes the RAM: obs must be 'ram', got "
-                         f"{obs!r}")
-    if obs == "ram" and any(name == "observation" for name, _, _ in cfg.components()):
+    if cfg.ram_observation and obs not in SCREENLESS_OBS:
+        raise ValueError(f"type 0 (ram_observation) observes the RAM: obs must be one of "
+                         f"{list(SCREENLESS_OBS)}, got {obs!r}")
+    if obs in SCREENLESS_OBS and any(name == "observation" for name, _, _ in cfg.components()):
         where = "Config.observation" if cfg.observation is not None \
             else "Config.drift.secondary.observation"
-        raise ValueError(f"obs='ram' cannot show an observation mask (type 3.2, {where}); "
+        raise ValueError(f"obs={obs!r} cannot show an observation mask (type 3.2, {where}); "
                          "use a screen obs")
+    if obs == "objects" and game is not None:
+        from stori_jax.objects import check_classes
+
+        check_classes(game, (), "obs='objects'")  # the game has an object table
     return obs
 
 
@@ -249,7 +254,7 @@ def subproc_frames_layout(plan: Plan, frame_work: str) -> str:
     """How the emulating processes hand over their screens (stori_jax.pixels): both screens
     where a mask is drawn per frame, the observation itself where they make it (no pixel mask
     to apply first), else the max-pooled screen."""
-    if plan.obs == "ram" or plan.needs_both_screens:
+    if not plan.screens or plan.needs_both_screens:
         return "pair"
     pixel_mask = plan.mask is not None and plan.mask.kind != "ram"
     if frame_work == "workers" and plan.obs in OBSERVATION_LAYOUTS and not pixel_mask:
@@ -265,7 +270,7 @@ def build_subproc(plan: Plan, seed: int, max_episode_frames: int, *, num_workers
     num_workers, inline_envs = worker_split(plan.num_envs, num_workers, inline_envs,
                                             daemonic=multiprocessing.current_process().daemon,
                                             cores=available_cores())
-    wants_screens = plan.obs != "ram"
+    wants_screens = plan.screens
     plan = dataclasses.replace(plan, frames_layout=subproc_frames_layout(plan, frame_work))
     event, mask = plan.event, plan.mask
     backend = SubprocBackend(
@@ -274,7 +279,8 @@ def build_subproc(plan: Plan, seed: int, max_episode_frames: int, *, num_workers
         event_mode=event.mode if event else None, event_prob=event.prob if event else 0.0,
         ram_obs_mode=mask.mode if mask is not None and mask.kind == "ram" else None,
         want_screens=wants_screens, max_episode_frames=max_episode_frames,
-        autoreset=plan.autoreset, frames_layout=plan.frames_layout, inline_envs=inline_envs)
+        autoreset=plan.autoreset, frames_layout=plan.frames_layout, inline_envs=inline_envs,
+        want_screen_ram=plan.needs_screen_ram)
     return plan, backend
 
 

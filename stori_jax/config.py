@@ -27,7 +27,8 @@ from .games.base import CROP_MODES, is_torch
 
 GRANULARITIES = ("frame", "step")
 DRIFT_SCHEDULES = ("sudden", "cyclic", "gradual")
-MASK_KINDS = ("crop", "blackout", "ram")
+MASK_KINDS = ("crop", "blackout", "ram", "objects")
+OBJECTS_MODES = {1: "the classes' boxes black"}  # kind "objects": how a hidden object looks
 TAXONOMY_TYPES = ("0", "1", "2.1", "2.2", "3.1", "3.2")
 SECONDARY_TYPES = ("1", "2.1", "3.2")
 
@@ -94,11 +95,14 @@ class ObservationMask:
     kind ``crop`` (any game): mode 1 left half, 2 right half, 3 top half, 4 bottom half, 5 torch.
     kind ``blackout``: fill the game's named regions (see the game's blackout table).
     kind ``ram``: render the frame from a modified copy of the RAM (see the game's RAM table).
+    kind ``objects`` (games with an object table, docs/objects.md): mode 1 blacks out the
+    boxes of the object ``classes`` (from each screen's own RAM).
     """
 
     kind: str
     mode: int
     prob: float = 1.0
+    classes: tuple[str, ...] | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "kind",
@@ -108,6 +112,21 @@ class ObservationMask:
         if mode == 0:
             raise ValueError(f"ObservationMask.mode 0 is the spec's 'none' for kind "
                              f"{self.kind!r}: leave the mask out (no observation mask is 3.1)")
+        if self.kind == "objects":
+            _check_choice("ObservationMask", "mode (objects)", mode, tuple(OBJECTS_MODES))
+            classes = (self.classes,) if isinstance(self.classes, str) else self.classes
+            if (not isinstance(classes, (tuple, list)) or not classes
+                    or not all(isinstance(c, str) for c in classes)):
+                raise ValueError("ObservationMask.classes must name the object classes to hide "
+                                 "(a non-empty tuple of names, e.g. ('Ball',): "
+                                 f"stori-jax list --objects), got {self.classes!r}")
+            if len(set(classes)) < len(classes):
+                raise ValueError(f"ObservationMask.classes must name each class once, got "
+                                 f"{self.classes!r}")
+            object.__setattr__(self, "classes", tuple(classes))
+        elif self.classes is not None:
+            raise ValueError(f"ObservationMask.classes applies to kind 'objects' only, got "
+                             f"classes={self.classes!r} with kind {self.kind!r}")
         if self.kind == "crop":
             _check_choice("ObservationMask", "mode (crop)", mode, CROP_MODES)
         elif mode < 1:
@@ -277,6 +296,8 @@ def _describe_part(part) -> str:
         return f"action noise {kind} p={part.prob:g}"
     if isinstance(part, RandomEvent):
         return f"event mode {part.mode} p={part.prob:g}"
+    if isinstance(part, ObservationMask) and part.kind == "objects":
+        return f"objects {'+'.join(part.classes)} hidden p={part.prob:g}"
     if isinstance(part, ObservationMask):
         return f"{part.kind} mode {part.mode} p={part.prob:g}"
     return repr(part)

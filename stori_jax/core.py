@@ -22,6 +22,7 @@ from stori_jax.checks import MAX_SEED, check_int, unless_traced
 from stori_jax.functional.preprocess import (ATARI84, STACK, pack_stack, push_packed,
                                              unpack_stack)
 from stori_jax.games import get_game
+from stori_jax.objects import has_objects, hidden_pixels, objects_array
 from stori_jax.pixels import OBSERVATION_LAYOUTS
 from stori_jax.plan import Plan
 
@@ -156,7 +157,7 @@ WorkerOutputs = collections.namedtuple("WorkerOutputs", STEP_OUTPUTS + FINAL_OUT
 
 
 def observe(plan: Plan, game, draws: Draws, frames, ram, ram_rendered, single_frame,
-            new_episode):
+            new_episode, screen_ram):
     """(observation, masked) of one set of the workers' screens (or RAM): the step's mask
     decisions applied (gated by the concept, or, for the first frame of an episode, by whether
     the mask shows on resets), then preprocessed (atari84: one frame, not yet stacked)."""
@@ -165,7 +166,7 @@ def observe(plan: Plan, game, draws: Draws, frames, ram, ram_rendered, single_fr
         masked = ram_rendered != 0
     if plan.frames_layout in OBSERVATION_LAYOUTS:  # made by the emulating processes (no mask)
         return frames + jnp.uint8(0), masked
-    if plan.mask is not None and plan.mask.kind != "ram" and plan.obs != "ram":
+    if plan.mask is not None and plan.mask.kind != "ram" and plan.screens:
         m = plan.mask
         reset_on = not m.under_drift
         gate = jnp.where(new_episode, reset_on, draws.step_active)
@@ -182,6 +183,10 @@ def observe(plan: Plan, game, draws: Draws, frames, ram, ram_rendered, single_fr
             if m.torch:
                 centres = jnp.take_along_axis(draws.mask_centres, k[:, None, None], 1)
                 screen = F.apply_masks(screen[:, None], apply, centres=centres)[:, 0]
+            elif m.kind == "objects":  # this screen's boxes, from its own RAM (a pair always)
+                hidden = (hidden_pixels(plan.game, screen_ram[:, j], m.classes)
+                          & apply[:, :, None])
+                screen = jnp.where(hidden[..., None], jnp.uint8(0), screen)
             else:
                 hidden, fill = plan.static_mask(game)
                 screen = F.apply_masks(screen[:, None], apply, hidden=hidden, fill=fill)[:, 0]
@@ -189,7 +194,7 @@ def observe(plan: Plan, game, draws: Draws, frames, ram, ram_rendered, single_fr
             masked = masked | apply[:, 0]
         screen = (jnp.maximum(masked_slots[0], masked_slots[1]) if pair else masked_slots[0])
     else:
-        screen = F.pool_screens(frames, plan.frames_layout) if plan.obs != "ram" else None
+        screen = F.pool_screens(frames, plan.frames_layout) if plan.screens else None
 
     if plan.obs == "raw":
         obs = screen
@@ -197,6 +202,8 @@ def observe(plan: Plan, game, draws: Draws, frames, ram, ram_rendered, single_fr
         obs = F.atari84_frame(screen)  # stacked by push_frames (a separate compilation)
     elif plan.obs == "dreamer64":
         obs = F.dreamer64(screen)
+    elif plan.obs == "objects":
+        obs = objects_array(plan.game, ram)
     else:
         obs = ram + jnp.uint8(0)
     return obs, masked
@@ -211,9 +218,19 @@ def final_observations(plan: Plan, game, draws: Draws, out: WorkerOutputs, obs):
     if out.final_frames is None:
         return obs + jnp.uint8(0)
     final, _ = observe(plan, game, draws, out.final_frames, out.final_ram, out.ram_rendered,
-                       out.final_single_frame, jnp.zeros((plan.num_envs,), bool))
+                       out.final_single_frame, jnp.zeros((plan.num_envs,), bool),
+                       out.final_screen_ram)
     done = ended(out)
     return jnp.where(jnp.reshape(done, done.shape + (1,) * (obs.ndim - 1)), final, obs)
+
+
+def final_objects(plan: Plan, out: WorkerOutputs, objects):
+    """info["final_objects"]: where the step ended an episode, the objects of the RAM it ended
+    on (as info["final_obs"] is its observation), elsewhere a copy of ``objects``."""
+    if out.final_ram is None:
+        return objects + 0
+    done = ended(out)
+    return jnp.where(done[:, None, None], objects_array(plan.game, out.final_ram), objects)
 
 
 def ended(out: WorkerOutputs):
@@ -231,7 +248,7 @@ def after_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, ne
     ``reset_step`` those that were reset instead of stepped (next-step autoreset)."""
     game = get_game(plan.game)
     obs, masked = observe(plan, game, draws, out.frames, out.ram, out.ram_rendered,
-                          out.single_frame, new_episode)
+                          out.single_frame, new_episode, out.screen_ram)
     slots_out = (lambda x: x) if plan.per_frame else (lambda x: x[:, 0])
     # an env reset instead of stepped played no-ops (NOOP), not this step's drawn actions, and
     # its first observation is seen under concept 1
@@ -253,6 +270,10 @@ def after_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, ne
         "reset_step": reset_step,
         "frames_played": out.frames_played + 0,
     }
+    if has_objects(plan.game):  # type 0 on every game with an object table
+        info["objects"] = objects_array(plan.game, out.ram)
+        if plan.autoreset:
+            info["final_objects"] = final_objects(plan, out, info["objects"])
     if plan.autoreset:
         info["final_obs"] = final_observations(plan, game, draws, out, obs)
     episode_step = jnp.where(new_episode, 0, state.episode_step + 1)

@@ -94,6 +94,12 @@ def jit_key(plan: Plan) -> Plan:
 
 
 def observation_space(plan: Plan) -> gym.spaces.Box:
+    if plan.obs == "objects":  # per env: (rows, 5) int32, x, y, w, h, present (docs/objects.md)
+        from stori_jax.objects import num_object_rows
+
+        bounds = np.iinfo(np.int32)
+        return gym.spaces.Box(bounds.min, bounds.max,
+                              (plan.num_envs, num_object_rows(plan.game), 5), np.int32)
     shape = {"raw": SCREEN, "atari84": (ATARI84, ATARI84, STACK),
              "dreamer64": (DREAMER64, DREAMER64, 3), "ram": (RAM_SIZE,)}[plan.obs]
     return gym.spaces.Box(0, 255, (plan.num_envs,) + shape, np.uint8)
@@ -435,7 +441,7 @@ class Env:
             out = self.backend.recv()
             names = STEP_OUTPUTS + (FINAL_OUTPUTS if self.plan.autoreset else ())
             result = WorkerOutputs(**{
-                name: np.array(out[name]) if name not in FRAME_OUTPUTS or self.plan.obs != "ram"
+                name: np.array(out[name]) if name not in FRAME_OUTPUTS or self.plan.screens
                 else np.zeros((0,), np.uint8) for name in names})
         except BaseException:
             # the emulators may be ahead of the JAX side: only reset() continues

@@ -15,7 +15,8 @@ import numpy as np
 from stori_jax.config import ActionNoise, Config, ObservationMask, RandomEvent
 from stori_jax.games.base import GameSpec
 
-OBS_KINDS = ("raw", "atari84", "dreamer64", "ram")
+OBS_KINDS = ("raw", "atari84", "dreamer64", "ram", "objects")
+SCREENLESS_OBS = ("ram", "objects")  # observations made from the RAM: no screen is handed over
 
 
 def numbers_traced(*numbers: str):
@@ -48,10 +49,11 @@ class EventPlan:
 @numbers_traced("prob")
 @dataclass(frozen=True)
 class MaskPlan:
-    kind: str  # crop | blackout | ram
+    kind: str  # crop | blackout | ram | objects
     mode: int
     prob: float
     under_drift: bool
+    classes: tuple[str, ...] = ()  # kind objects: the classes hidden
 
     @property
     def torch(self) -> bool:
@@ -79,10 +81,22 @@ class Plan:
     frames_layout: str = "pair"  # how the backend delivers screens (see pool_screens)
 
     @property
+    def screens(self) -> bool:
+        """Whether the emulators hand screens over (not for an observation of the RAM)."""
+        return self.obs not in SCREENLESS_OBS
+
+    @property
     def needs_both_screens(self) -> bool:
-        """True when a crop/blackout mask is drawn per emulator frame: each of the last two
-        screens must be masked on its own before the max-pool."""
-        return (self.mask is not None and self.mask.kind != "ram" and self.per_frame)
+        """True when each of the last two screens must be masked on its own before the
+        max-pool: a crop/blackout mask drawn per emulator frame, or hidden objects (each screen
+        has its own boxes, from its own RAM)."""
+        return self.mask is not None and (self.mask.kind == "objects" or
+                                          (self.mask.kind != "ram" and self.per_frame))
+
+    @property
+    def needs_screen_ram(self) -> bool:
+        """The RAM of each handed-over screen is needed (hidden objects' boxes)."""
+        return self.mask is not None and self.mask.kind == "objects" and self.screens
 
     @property
     def num_slots(self) -> int:
@@ -109,7 +123,8 @@ def compile_plan(config: Config, game: GameSpec, *, num_envs: int, frame_skip: i
         elif isinstance(part, RandomEvent):
             parts["event"] = EventPlan(part.mode, part.prob, under_drift)
         elif isinstance(part, ObservationMask):
-            parts["mask"] = MaskPlan(part.kind, part.mode, part.prob, under_drift)
+            parts["mask"] = MaskPlan(part.kind, part.mode, part.prob, under_drift,
+                                     part.classes or ())
     drift = config.drift
     return Plan(game=game.name, num_envs=num_envs, num_actions=game.num_actions,
                 frame_skip=frame_skip, per_frame=config.granularity == "frame", obs=obs,

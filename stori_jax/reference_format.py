@@ -29,10 +29,11 @@ from typing import Any, Mapping
 import numpy as np
 
 from stori_jax.checks import check_draw_probability
-from stori_jax.config import (DRIFT_SCHEDULES, MASK_KINDS, SECONDARY_TYPES, ActionNoise, Config,
+from stori_jax.config import (DRIFT_SCHEDULES, SECONDARY_TYPES, ActionNoise, Config,
                               ConceptDrift, ObservationMask, RandomEvent)
 
 _TYPES = ("1", "2.1", "2.2", "3.1", "3.2")
+REFERENCE_MASK_KINDS = ("crop", "blackout", "ram")  # the reference's (objects is stori-jax's)
 _ACTION = "intrinsic_stochasticity.action_dependent"
 _RANDOM = "intrinsic_stochasticity.action_independent_random"
 _DRIFT = "intrinsic_stochasticity.action_independent_concept_drift"
@@ -151,7 +152,7 @@ def _concept(kind: str, r: _Reader) -> Config:
             mode=r.get(f"{_RANDOM}.mode", _mode, "an event mode ('1', '2', ...)"),
             prob=r.get(f"{_RANDOM}.random_stochasticity_prob", _probability, "a probability")))
     if kind == "3.2":
-        kind_ = r.choice(f"{_OBS}.type", MASK_KINDS)
+        kind_ = r.choice(f"{_OBS}.type", REFERENCE_MASK_KINDS)
         mode = r.get(f"{_OBS}.mode", _mode, "a mode ('1', '2', ...)")
         prob = (r.get(f"{_OBS}.prob", _probability, "a probability")
                 if f"{_OBS}.prob" in r.flat else 1.0)

@@ -52,7 +52,7 @@ def output_shapes(plan) -> WorkerOutputs:
     autoresetting env's always holds the final_* outputs (a compiled step has one shape)."""
     shapes = buffer_specs(plan.num_envs, plan.frame_skip, final=plan.autoreset,
                           frames_layout=plan.frames_layout)
-    if plan.obs == "ram":
+    if not plan.screens:
         shapes.update({name: ((0,), np.uint8) for name in FRAME_OUTPUTS if name in shapes})
     return WorkerOutputs(**{name: jax.ShapeDtypeStruct(*shapes[name])
                             for name in WorkerOutputs._fields if name in shapes})

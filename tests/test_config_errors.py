@@ -150,7 +150,7 @@ def test_mode_not_an_int(mode):
 @pytest.mark.parametrize("kind", ["hide", "Crop", "", None])
 def test_unknown_kind(kind):
     with pytest.raises(ValueError, match=r"ObservationMask\.kind must be one of "
-                                         rf"{re.escape(str(['crop', 'blackout', 'ram']))}, "
+                                         rf"{re.escape(str(['crop', 'blackout', 'ram', 'objects']))}, "
                                          rf"got {re.escape(repr(kind))}"):
         ObservationMask(kind, 1)
 

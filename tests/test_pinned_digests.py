@@ -1,6 +1,5 @@
-"""Every paper preset's observations and info, pinned: digests recorded on the code before the
-frame work moved into the emulating processes (tests/fixtures/preset_digests.json).  A change
-that alters one bit of any preset's run fails here.  Regenerate only for a change of semantics:
+"""Every paper preset's observations and info, pinned (tests/fixtures/preset_digests.json).  A
+change that alters one bit of any preset's run fails here.  Regenerate only for a change of semantics:
 ``python tests/test_pinned_digests.py --record``."""
 
 from __future__ import annotations
@@ -55,7 +54,8 @@ def run_digest(game: str, preset: str, **make_kw) -> str:
 # beside each preset's default observation: the other screen observations, whose frame work
 # takes other paths
 VARIANTS = [("Breakout", "3.1", "raw"), ("Breakout", "3.1", "dreamer64"), ("Gopher", "2.1", "raw"),
-            ("BankHeist", "2.2", "dreamer64"), ("Boxing", "1", "raw")]
+            ("BankHeist", "2.2", "dreamer64"), ("Boxing", "1", "raw"),
+            ("Breakout", "3.1", "objects")]
 
 
 def recorded() -> dict:

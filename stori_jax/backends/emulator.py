@@ -45,6 +45,7 @@ class EmulatorSpec:
     # "pooled" (max-pooled into slot 0 here), or the observation made here ("atari84",
     # "dreamer64"), the screens staying in this process
     frames_layout: str = "pair"
+    want_screen_ram: bool = False  # the RAM each handed-over screen was made from (objects)
 
 
 class Emulator:
@@ -74,6 +75,7 @@ class Emulator:
             self.frames = views["frames"][:, index]  # (2, 210, 160, 3), each slot contiguous
         else:
             self.frames = np.zeros((2,) + SCREEN, np.uint8)
+        self.screen_ram = views["screen_ram"][index]  # (2, 128): each screen's RAM
         self.prev_ram = np.zeros(128, np.uint8)
         self.start_ram = np.zeros(128, np.uint8)
 
@@ -97,6 +99,9 @@ class Emulator:
         self.episode_length = 0
         rendered = 0
         v["single_frame"][i] = 1
+        if self.spec.want_screen_ram:
+            ale.getRAM(self.screen_ram[0])
+            self.screen_ram[1] = self.screen_ram[0]
         if self.spec.want_screens:
             ale.getScreenRGB(self.frames[0])
             self.frames[1] = self.frames[0]
@@ -209,6 +214,9 @@ class Emulator:
             terminated = ale.game_over(with_truncation=False)
             truncated = ale.game_truncated()
             done = terminated or truncated
+            if spec.want_screen_ram and (f >= skip - 2 or done):
+                # the RAM the frame was drawn from (before an event rule's writes after it)
+                ale.getRAM(self.screen_ram[1 if f == skip - 1 or done else 0])
             if per_frame or f == skip - 1 or done:
                 if rule is not None and rule.post_frame is not None:
                     ale.getRAM(self.ram)
@@ -242,6 +250,8 @@ class Emulator:
         single = skip == 1 or ends_early
         if spec.want_screens and single:
             self.frames[0] = self.frames[1]
+        if spec.want_screen_ram and single:
+            self.screen_ram[0] = self.screen_ram[1]
         v["single_frame"][i] = single
         v["frames_played"][i] = f + 1
         self.episode_return += total
@@ -259,6 +269,8 @@ class Emulator:
                 self.publish(final=True)
             v["final_single_frame"][i] = single
             ale.getRAM(v["final_ram"][i])
+            if spec.want_screen_ram:
+                v["final_screen_ram"][i] = self.screen_ram
             self.reset()
         else:
             if spec.want_screens:

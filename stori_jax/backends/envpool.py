@@ -60,6 +60,8 @@ def unsupported_reasons(plan) -> list[str]:
         reasons.append("2.1 random events write the RAM between frames")
     if plan.mask is not None and plan.mask.kind == "ram":
         reasons.append("RAM observation modes render frames from a modified RAM")
+    if plan.mask is not None and plan.mask.kind == "objects":
+        reasons.append("hidden objects need the RAM of each of a step's last two frames")
     if plan.per_frame and plan.noise is not None:
         reasons.append("type 1 at 'frame' granularity needs an action per emulator frame "
                        "(use granularity='step')")

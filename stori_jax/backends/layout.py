@@ -49,6 +49,8 @@ STEP_BUFFERS = (
     StepBuffer("frames", np.uint8, "frames", "emulators"),     # the last two screens (one
     #                                                            frame in both: single_frame)
     StepBuffer("ram", np.uint8, (RAM_SIZE,), "emulators"),
+    StepBuffer("screen_ram", np.uint8, (2, RAM_SIZE), "emulators"),  # the RAM each screen of
+    #                                                  the pair was made from (hidden objects)
     StepBuffer("ram_rendered", np.uint8, (), "emulators"),     # render bits applied (0..3)
     StepBuffer("single_frame", np.uint8, (), "emulators"),     # both screens one frame (a
     #                                                            reset, skip 1, an early end)
@@ -61,10 +63,12 @@ STEP_BUFFERS = (
     StepBuffer("event_fired", np.int32, (), "emulators"),
     StepBuffer("episode_return", np.float32, (), "emulators"),  # where an episode ended
     StepBuffer("episode_length", np.int32, (), "emulators"),
-    # an autoresetting batch: what frames, single_frame and ram held before the autoreset
+    # an autoresetting batch: what frames, single_frame, ram, screen_ram held before the
+    # autoreset
     StepBuffer("final_frames", np.uint8, "frames", "emulators", final=True),
     StepBuffer("final_single_frame", np.uint8, (), "emulators", final=True),
     StepBuffer("final_ram", np.uint8, (RAM_SIZE,), "emulators", final=True),
+    StepBuffer("final_screen_ram", np.uint8, (2, RAM_SIZE), "emulators", final=True),
 )
 STEP_OUTPUTS = tuple(b.name for b in STEP_BUFFERS if b.writer == "emulators" and not b.final)
 FINAL_OUTPUTS = tuple(b.name for b in STEP_BUFFERS if b.final)

@@ -172,7 +172,8 @@ class SubprocBackend:
     def __init__(self, *, game: str, seeds: list[int], num_workers: int, frame_skip: int,
                  per_frame: bool, event_mode: int | None, event_prob: float,
                  ram_obs_mode: int | None, want_screens: bool, max_episode_frames: int,
-                 autoreset: bool = True, frames_layout: str = "pair", inline_envs: int = 0):
+                 autoreset: bool = True, frames_layout: str = "pair", inline_envs: int = 0,
+                 want_screen_ram: bool = False):
         num_envs = len(seeds)
         if num_workers and mp.current_process().daemon:  # Python forbids it: say what works
             raise RuntimeError(
@@ -208,7 +209,8 @@ class SubprocBackend:
                               frame_skip=frame_skip, per_frame=per_frame, event_mode=event_mode,
                               event_prob=event_prob, ram_obs_mode=ram_obs_mode,
                               want_screens=want_screens, max_episode_frames=max_episode_frames,
-                              autoreset=autoreset, frames_layout=frames_layout)
+                              autoreset=autoreset, frames_layout=frames_layout,
+                              want_screen_ram=want_screen_ram)
 
         # the calling process emulates its envs while the workers run theirs
         self._inline = []

@@ -136,6 +136,10 @@ class GameSpec:
             if mask is not None and mask.kind == "ram":
                 self._check_mode(f"{where}.observation.mode", mask.mode, self.ram_obs_modes,
                                  "RAM observation modes")
+            if mask is not None and mask.kind == "objects":
+                from stori_jax.objects import check_classes  # JAX: not in the workers
+
+                check_classes(self.name, mask.classes, f"{where}.observation.classes")
             noise = cfg.action_noise
             if noise is not None and noise.replacement_actions is not None:
                 bad = [a for a in noise.replacement_actions if a >= self.num_actions]

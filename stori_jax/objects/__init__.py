@@ -23,6 +23,7 @@ import numpy as np
 from stori_jax.objects.table import Boxes, GameObjects, ObjectClass  # noqa: F401 (re-exported)
 
 RAM_SIZE = 128
+SCREEN_HEIGHT, SCREEN_WIDTH = 210, 160
 
 # the ALE ROM id of every covered game (its module's name)
 GAMES = (
@@ -149,3 +150,53 @@ def objects_array(game: str, ram, classes=None):
     order = [c.name for c in table.classes if c.name in names]
     return jnp.concatenate([jnp.stack([*out[n][:4], out[n].present.astype(jnp.int32)], axis=-1)
                             for n in order], axis=1)
+
+
+def check_classes(game: str, classes, field: str = "classes") -> tuple[str, ...]:
+    """``classes`` of ``game``, checked: a ValueError (naming ``field``) where the game has no
+    object table (naming the games that have one) or no such class (naming its classes)."""
+    try:
+        table = object_table(game)
+    except ValueError:
+        raise ValueError(f"{field}: {game} has no object table (objects from its RAM); the games "
+                         f"with objects are {list(covered_games())}") from None
+    known = [c.name for c in table.classes]
+    bad = [c for c in classes if c not in known]
+    if bad:
+        raise ValueError(f"{field}: {table.name} has no object class {bad[0]!r}: its classes "
+                         f"are {known}")
+    return tuple(classes)
+
+
+def hidden_pixels(game: str, ram, classes) -> jax.Array:
+    """(B, 210, 160) bool: the pixels inside a box of a present object of ``classes`` in
+    ``ram`` (B, 128) (boxes clipped to the screen; traceable)."""
+    out = objects_of(game, ram, tuple(classes))
+    rows, cols = jnp.arange(SCREEN_HEIGHT), jnp.arange(SCREEN_WIDTH)
+    covered = jnp.zeros((ram.shape[0], SCREEN_HEIGHT, SCREEN_WIDTH), jnp.float32)
+    for boxes in out.values():
+        x, y, w, h, present = (v[..., None] for v in boxes)  # (B, slots, 1)
+        in_rows = present & (rows >= y) & (rows < y + h)      # (B, slots, 210)
+        in_cols = (cols >= x) & (cols < x + w)                # (B, slots, 160)
+        # how many boxes cover each pixel (exact: small integers in float32)
+        covered = covered + jnp.einsum("bsr,bsc->brc", in_rows.astype(jnp.float32),
+                                       in_cols.astype(jnp.float32))
+    return covered > 0
+
+
+def objects_layout(game: str) -> list[tuple[str, int]]:
+    """The rows of ``obs="objects"`` / ``info["objects"]`` for ``game``: (class, slot) per row,
+    in order (each row is x, y, w, h, present)."""
+    return [(c.name, k) for c in object_table(game).classes for k in range(c.slots)]
+
+
+def num_object_rows(game: str) -> int:
+    return sum(c.slots for c in object_table(game).classes)
+
+
+def has_objects(game: str) -> bool:
+    try:
+        object_table(game)
+    except ValueError:
+        return False
+    return True
