@@ -2,6 +2,7 @@
 
     .venv/bin/python docs/make_pictures.py            # presets and every mode (about 8 minutes)
     .venv/bin/python docs/make_pictures.py --presets  # the 24 preset pictures only
+    .venv/bin/python docs/make_pictures.py --objects  # the hidden-objects sheet, the coverage
 
 Writes docs/img/<Game>-<preset>.png and docs/img/modes/<Game>-<kind>-<mode>.png, and
 docs/modes.md, the page that lists every mode of every game with its picture.
@@ -40,10 +41,34 @@ def mode_configs():
             yield game, "event", mode, entry.name, Config(event=RandomEvent(mode, EVENT_PROB))
 
 
+COVERAGE = "## Coverage\n"
+
+
+def write_objects_docs() -> None:
+    """docs/img/objects-hidden.png and the coverage table at the end of docs/objects.md."""
+    from stori_jax.objects import listing, object_table
+    from stori_jax.visual import objects_gallery
+
+    objects_gallery(DOCS / "img" / "objects-hidden.png")
+    games = listing()
+    lines = [COVERAGE, f"{len(games)} games (`stori-jax list --objects`); slots in brackets.", "",
+             "| game | classes | notes |", "|---|---|---|"]
+    for game, classes in games.items():
+        notes = " ".join(object_table(game).notes.split()) or "-"
+        lines.append(f"| {game} | " + ", ".join(f"{c} ({n})" for c, n in classes.items())
+                     + f" | {notes} |")
+    page = DOCS / "objects.md"
+    page.write_text(page.read_text().split(COVERAGE)[0] + "\n".join(lines) + "\n")
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--presets", action="store_true", help="only the preset pictures")
+    parser.add_argument("--objects", action="store_true",
+                        help="only the hidden-objects sheet and docs/objects.md's coverage")
     args = parser.parse_args(argv)
+    if args.objects:
+        return write_objects_docs()
     img = DOCS / "img"
     for game, name in tqdm(stori_jax.list_presets(), desc="presets"):
         contact_sheet(game, name, stori_jax.preset(game, name), img / f"{game}-{name}.png",

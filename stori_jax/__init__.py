@@ -11,7 +11,7 @@ functions load on first use (the emulator workers import this package without JA
 
 from stori_jax import fork_guard  # noqa: F401 - notes a fork after JAX started
 from stori_jax.config import (ActionNoise, Config, ConceptDrift, ObservationMask,  # noqa: F401
-                              RandomEvent)
+                              RamEvent, RandomEvent)
 from stori_jax.games import STORI_GAMES, get_game  # noqa: F401
 from stori_jax.presets import describe_preset, list_presets, preset  # noqa: F401
 from stori_jax.reference_format import config_from_reference  # noqa: F401
@@ -33,9 +33,10 @@ _LAZY = {
     "Phase": ("stori_jax.env", "Phase"),
     "functional": ("stori_jax.functional", None),
     "metrics": ("stori_jax.metrics", None),
+    "ram_event": ("stori_jax.ram_events", "ram_event"),
 }
 
-__all__ = ["ActionNoise", "Config", "ConceptDrift", "ObservationMask", "RandomEvent",
+__all__ = ["ActionNoise", "Config", "ConceptDrift", "ObservationMask", "RamEvent", "RandomEvent",
            "STORI_GAMES", "get_game", "describe_preset", "list_presets", "preset",
            "config_from_reference",
            *_LAZY]

@@ -11,7 +11,7 @@ import os
 
 import numpy as np
 
-from stori_jax.backends.layout import shared_bytes
+from stori_jax.backends.layout import SCREEN, shared_bytes
 from stori_jax.checks import MAX_INT32, MAX_SEED, check_int
 from stori_jax.config import GRANULARITIES, Config
 from stori_jax.fork_guard import refuse_if_forked_after_jax
@@ -71,6 +71,10 @@ def make(game: str, preset: str | None = None, *, config: Config | None = None,
                               frame_skip=frame_skip, max_episode_frames=max_episode_frames,
                               noop_max=noop_max)
     obs = resolve_obs(cfg, obs, spec.name)
+    if spec.screen_height != SCREEN[0] and obs not in SCREENLESS_OBS:
+        raise ValueError(f"{spec.name}'s screen has {spec.screen_height} rows; stori-jax's screen "
+                         f"observations are {SCREEN[0]} x {SCREEN[1]}: use obs one of "
+                         f"{list(SCREENLESS_OBS)} for it")
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
     if backend == "subproc":
@@ -276,7 +280,8 @@ def build_subproc(plan: Plan, seed: int, max_episode_frames: int, *, num_workers
     backend = SubprocBackend(
         game=plan.game, seeds=emulator_seeds(seed, plan.num_envs), num_workers=num_workers,
         frame_skip=plan.frame_skip, per_frame=plan.per_frame,
-        event_mode=event.mode if event else None, event_prob=event.prob if event else 0.0,
+        event_mode=event.mode if event and not event.ram_event else None,
+        ram_event=event.ram_event if event else None, event_prob=event.prob if event else 0.0,
         ram_obs_mode=mask.mode if mask is not None and mask.kind == "ram" else None,
         want_screens=wants_screens, max_episode_frames=max_episode_frames,
         autoreset=plan.autoreset, frames_layout=plan.frames_layout, inline_envs=inline_envs,

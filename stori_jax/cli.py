@@ -18,8 +18,27 @@ from stori_jax.plugins import add_commands
 from stori_jax.visual import AFTER_SWITCH, SHEET_STEPS, episode_step_cap
 
 
+def _list_objects() -> int:
+    from stori_jax.objects import listing
+    from stori_jax.ram_events import NAMED_RAM_EVENTS
+
+    games = listing()
+    print(f"Object tables ({len(games)} games; obs='objects', info['objects'], "
+          "ObservationMask('objects', 1, p, classes=...)):")
+    for game, classes in games.items():
+        print(f"  {game:<14} " + ", ".join(f"{name} x{slots}" if slots > 1 else name
+                                             for name, slots in classes.items()))
+    print("\nNamed RAM events (stori_jax.ram_event(game, name, prob)):")
+    for (game, name), (what, _) in NAMED_RAM_EVENTS.items():
+        print(f"  {game:<14} {name:<14} {what}")
+    return 0
+
+
 def _cmd_list(args) -> int:
     from stori_jax import STORI_GAMES, describe_preset, get_game, list_presets
+
+    if args.objects:
+        return _list_objects()
     from stori_jax.functional.masks import CROP_REGIONS, TORCH_MODE, TORCH_RADIUS
 
     print("Presets (game, name: definition):")
@@ -265,7 +284,9 @@ SEED_HELP = "environment seed (default 0)"
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="stori-jax", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
-    sub.add_parser("list", help="print games, presets and modes")
+    listing = sub.add_parser("list", help="print games, presets and modes")
+    listing.add_argument("--objects", action="store_true",
+                         help="the games with object tables, their classes, the named RAM events")
     run = sub.add_parser("run", help="run a random policy on a preset and print a summary")
     run.add_argument("game", help=GAME_HELP)
     run.add_argument("preset", nargs="?", default=None,

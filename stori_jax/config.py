@@ -88,6 +88,41 @@ class RandomEvent:
         object.__setattr__(self, "prob", check_draw_probability("RandomEvent.prob", self.prob))
 
 
+RAM_CONDITIONS = ("==", "!=", "<", "<=", ">", ">=")
+
+
+@dataclass(frozen=True)
+class RamEvent:
+    """Type 2.1 on any game: with probability ``prob`` per frame (or step), where ``when``
+    holds on the RAM after the frame (``(address, op, value)``, or None: always), write one of
+    ``values`` (drawn uniformly) to RAM ``address``; the next frame plays from it.  Named
+    examples: :func:`stori_jax.ram_events.ram_event`."""
+
+    address: int
+    values: tuple[int, ...]
+    prob: float
+    when: tuple[int, str, int] | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "address", check_int("RamEvent.address", self.address, 0, 127))
+        values = (self.values,) if isinstance(self.values, int) else self.values
+        if not isinstance(values, (tuple, list)) or not values:
+            raise ValueError(f"RamEvent.values must be a non-empty tuple of bytes (0..255), "
+                             f"got {self.values!r}")
+        object.__setattr__(self, "values", tuple(check_int("RamEvent.values", v, 0, 255)
+                                                 for v in values))
+        object.__setattr__(self, "prob", check_draw_probability("RamEvent.prob", self.prob))
+        if self.when is not None:
+            if not (isinstance(self.when, (tuple, list)) and len(self.when) == 3):
+                raise ValueError("RamEvent.when must be (address, op, value) with op one of "
+                                 f"{list(RAM_CONDITIONS)}, or None, got {self.when!r}")
+            address, op, value = self.when
+            object.__setattr__(self, "when", (
+                check_int("RamEvent.when address", address, 0, 127),
+                _check_choice("RamEvent", "when op", op, RAM_CONDITIONS),
+                check_int("RamEvent.when value", value, 0, 255)))
+
+
 @dataclass(frozen=True)
 class ObservationMask:
     """Type 3.2: hide part of the observation with probability ``prob`` per frame (or step).
@@ -175,7 +210,7 @@ class Config:
     """A STORI environment configuration. All parts default to "off" (type 3.1)."""
 
     action_noise: ActionNoise | None = None
-    event: RandomEvent | None = None
+    event: RandomEvent | RamEvent | None = None
     drift: ConceptDrift | None = None
     observation: ObservationMask | None = None
     ram_observation: bool = False
@@ -184,11 +219,12 @@ class Config:
     type: str = field(default="")
 
     def __post_init__(self):
-        for name, cls in (("action_noise", ActionNoise), ("event", RandomEvent),
+        for name, cls in (("action_noise", ActionNoise), ("event", (RandomEvent, RamEvent)),
                           ("drift", ConceptDrift), ("observation", ObservationMask)):
             value = getattr(self, name)
             if value is not None and not isinstance(value, cls):
-                raise ValueError(f"Config.{name} must be a {cls.__name__} or None, got {value!r}")
+                names = " or ".join(c.__name__ for c in (cls if isinstance(cls, tuple) else (cls,)))
+                raise ValueError(f"Config.{name} must be a {names} or None, got {value!r}")
         object.__setattr__(self, "ram_observation",
                            check_bool("Config.ram_observation", self.ram_observation))
         object.__setattr__(self, "granularity", _check_choice("Config", "granularity",
@@ -291,6 +327,9 @@ class Config:
 
 
 def _describe_part(part) -> str:
+    if isinstance(part, RamEvent):
+        when = f" when RAM[{part.when[0]}] {part.when[1]} {part.when[2]}" if part.when else ""
+        return f"RAM[{part.address}] <- {list(part.values)}{when} p={part.prob:g}"
     if isinstance(part, ActionNoise):
         kind = "sticky" if part.sticky else "uniform replacement"
         return f"action noise {kind} p={part.prob:g}"

@@ -83,11 +83,12 @@ NOT_COPIED = ("a stori_jax.Env owns its emulator worker processes and cannot be 
 
 
 def jit_key(plan: Plan) -> Plan:
-    """``plan`` without the structure only the workers use (event and RAM-obs modes), so
+    """``plan`` without the structure only the workers use (event rules, RAM-obs modes), so
     configs that differ only there share one compilation of the JAX side (numbers are traced:
     see stori_jax.plan)."""
     if plan.event is not None:
-        plan = dataclasses.replace(plan, event=dataclasses.replace(plan.event, mode=0))
+        plan = dataclasses.replace(plan, event=dataclasses.replace(plan.event, mode=0,
+                                                                   ram_event=None))
     if plan.mask is not None and plan.mask.kind == "ram":
         plan = dataclasses.replace(plan, mask=dataclasses.replace(plan.mask, mode=0))
     return plan

@@ -12,7 +12,7 @@ from dataclasses import dataclass, fields
 import jax
 import numpy as np
 
-from stori_jax.config import ActionNoise, Config, ObservationMask, RandomEvent
+from stori_jax.config import ActionNoise, Config, ObservationMask, RamEvent, RandomEvent
 from stori_jax.games.base import GameSpec
 
 OBS_KINDS = ("raw", "atari84", "dreamer64", "ram", "objects")
@@ -41,9 +41,10 @@ class NoisePlan:
 @numbers_traced("prob")
 @dataclass(frozen=True)
 class EventPlan:
-    mode: int
+    mode: int  # the game's event mode (0: a RamEvent)
     prob: float
     under_drift: bool
+    ram_event: tuple | None = None  # a RamEvent's (address, values, when)
 
 
 @numbers_traced("prob")
@@ -122,6 +123,9 @@ def compile_plan(config: Config, game: GameSpec, *, num_envs: int, frame_skip: i
                                        under_drift)
         elif isinstance(part, RandomEvent):
             parts["event"] = EventPlan(part.mode, part.prob, under_drift)
+        elif isinstance(part, RamEvent):
+            parts["event"] = EventPlan(0, part.prob, under_drift,
+                                       (part.address, part.values, part.when))
         elif isinstance(part, ObservationMask):
             parts["mask"] = MaskPlan(part.kind, part.mode, part.prob, under_drift,
                                      part.classes or ())

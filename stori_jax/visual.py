@@ -310,3 +310,35 @@ def record_episode(game: str, name: str, config: Config, path: Path, *, max_step
     return _save_whole(path, lambda tmp: images[0].save(
         tmp, save_all=True, append_images=images[1:], duration=50, loop=0,
         optimize=False))
+
+
+# eight games with a class hidden (ObservationMask kind "objects"), for objects_gallery
+GALLERY_HIDDEN = (("Breakout", ("Ball",)), ("Pong", ("Ball",)), ("Freeway", ("Car",)),
+                  ("Boxing", ("Enemy",)), ("Seaquest", ("Player",)), ("Tennis", ("Ball",)),
+                  ("Bowling", ("Ball",)), ("Asterix", ("Enemy",)))
+
+
+def objects_gallery(path: Path, *, steps: int = 120, seed: int = 0,
+                    hidden=GALLERY_HIDDEN) -> Path:
+    """A PNG: one column per game, the 3.1 screen on top and below it the same screen with
+    ``hidden``'s classes blacked out (ObservationMask('objects', 1, 1.0, classes)), after
+    ``steps`` random steps."""
+    from stori_jax.config import ObservationMask
+
+    Image, ImageDraw = _pil()
+    w, h, pad, top, title = 160, 210, 6, 16, 22
+    sheet = Image.new("RGB", (len(hidden) * (w + pad) + pad, title + 2 * (h + top + pad)),
+                      (24, 24, 24))
+    draw = ImageDraw.Draw(sheet)
+    draw.text((pad, 4), "top: 3.1; bottom: the named object class hidden (kind 'objects')",
+              fill=(230, 230, 230))
+    for c, (game, classes) in enumerate(hidden):
+        config = Config(observation=ObservationMask("objects", 1, 1.0, classes=classes))
+        frame = twin_run(game, config, steps, seed)[-1]
+        x = pad + c * (w + pad)
+        for r, key in enumerate(("twin", "preset")):
+            y = title + r * (h + top + pad)
+            draw.text((x, y + 2), game if r == 0 else "hidden: " + "+".join(classes),
+                      fill=(230, 230, 120))
+            sheet.paste(Image.fromarray(frame[key]), (x, y + top))
+    return _save_whole(path, sheet.save)

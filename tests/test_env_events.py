@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import stori_jax
 from stori_jax import Config, ConceptDrift, RandomEvent
 
 from _env_support import (NOOP, binomial_ok, breakout_tracker, lockstep_with_twin, make,
@@ -648,3 +649,38 @@ def test_bankheist_empty_bank_zeroes_the_robbery_reward():
     r_ev, r_twin = ev.stacked("reward"), twin.stacked("reward")
     np.testing.assert_array_equal(r_ev[~fired], r_twin[~fired])
     assert (r_twin[fired] > 0).all() and (r_ev[fired] == 0).all()
+
+
+def test_a_ram_event_writes_one_of_its_values_at_its_rate_where_its_condition_holds():
+    """RamEvent on a game outside STORI (Pong): where info['event_fired'], the RAM after the
+    step holds one of the values (frame skip 1: nothing plays after the write); the rate is p
+    within 4 standard errors; a condition that never holds (Freeway's chicken kept on the kerb
+    by NOOP) never fires, even at p = 1."""
+    event = stori_jax.ram_event("Pong", "paddle_jump", 0.3)
+    with stori_jax.make("Pong", config=stori_jax.Config(event=event, granularity="step"),
+                        num_envs=2, seed=0, frame_skip=1) as env:
+        env.reset()
+        fired = written = 0
+        for _ in range(300):
+            *_, info = env.step([0, 0])
+            hit = np.asarray(info["event_fired"]) > 0
+            fired += hit.sum()
+            written += np.isin(np.asarray(info["ram"])[hit, 51], event.values).sum()
+    n = 600
+    assert written == fired and abs(fired / n - 0.3) < 4 * np.sqrt(0.3 * 0.7 / n)
+    kerb = stori_jax.Config(event=stori_jax.ram_event("Freeway", "chicken_back", 1.0))
+    with stori_jax.make("Freeway", config=kerb, num_envs=1, seed=0) as env:
+        env.reset()
+        assert sum(int(env.step([0])[4]["event_fired"][0]) for _ in range(20)) == 0
+
+
+def test_ram_event_bad_input_names_the_field_and_the_allowed_values():
+    with pytest.raises(ValueError, match=r"RamEvent\.address"):
+        stori_jax.RamEvent(address=128, values=(1,), prob=0.1)
+    with pytest.raises(ValueError, match=r"RamEvent\.values"):
+        stori_jax.RamEvent(address=3, values=(), prob=0.1)
+    with pytest.raises(ValueError, match=r"RamEvent\.when op must be one of \['==', '!='"):
+        stori_jax.RamEvent(address=3, values=(1,), prob=0.1, when=(3, "~", 1))
+    with pytest.raises(ValueError, match=r"no RAM event 'x' for game 'Pong': the named RAM "
+                                         r"events are \['Breakout/paddle_jump'"):
+        stori_jax.ram_event("Pong", "x", 0.1)

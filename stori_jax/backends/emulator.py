@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from stori_jax.backends.layout import RESET_RENDER_BITS, SCREEN, STEP_RENDER_BITS
+from stori_jax.games.base import ram_write_rule
 from stori_jax.pixels import OBSERVE
 
 
@@ -46,6 +47,7 @@ class EmulatorSpec:
     # "dreamer64"), the screens staying in this process
     frames_layout: str = "pair"
     want_screen_ram: bool = False  # the RAM each handed-over screen was made from (objects)
+    ram_event: tuple | None = None  # a RamEvent's (address, values, when): the event rule
 
 
 class Emulator:
@@ -66,7 +68,8 @@ class Emulator:
         self.noop = self.actions[0]
         self.spec = spec
         self.i = index
-        self.rule = game.event_modes[spec.event_mode] if spec.event_mode is not None else None
+        self.rule = (game.event_modes[spec.event_mode] if spec.event_mode is not None
+                     else ram_write_rule(*spec.ram_event) if spec.ram_event is not None else None)
         self.ram_obs = game.ram_obs_modes[spec.ram_obs_mode] if spec.ram_obs_mode is not None else None
         self.v = views
         self.ram = views["ram"][index]          # true RAM, written in place

@@ -173,7 +173,7 @@ class SubprocBackend:
                  per_frame: bool, event_mode: int | None, event_prob: float,
                  ram_obs_mode: int | None, want_screens: bool, max_episode_frames: int,
                  autoreset: bool = True, frames_layout: str = "pair", inline_envs: int = 0,
-                 want_screen_ram: bool = False):
+                 want_screen_ram: bool = False, ram_event: tuple | None = None):
         num_envs = len(seeds)
         if num_workers and mp.current_process().daemon:  # Python forbids it: say what works
             raise RuntimeError(
@@ -210,7 +210,7 @@ class SubprocBackend:
                               event_prob=event_prob, ram_obs_mode=ram_obs_mode,
                               want_screens=want_screens, max_episode_frames=max_episode_frames,
                               autoreset=autoreset, frames_layout=frames_layout,
-                              want_screen_ram=want_screen_ram)
+                              want_screen_ram=want_screen_ram, ram_event=ram_event)
 
         # the calling process emulates its envs while the workers run theirs
         self._inline = []

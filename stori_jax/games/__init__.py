@@ -64,16 +64,17 @@ def get_game(name: str) -> GameSpec:
 def _other_game(rom_id: str) -> GameSpec:
     """A game outside STORI, named from its ROM id: 'space_invaders' -> 'SpaceInvaders'."""
     name = "".join(part.capitalize() for part in rom_id.split("_"))
-    num_actions, start_lives = _power_on_facts(rom_id)
-    return GameSpec(name=name, rom_id=rom_id, num_actions=num_actions, start_lives=start_lives)
+    num_actions, start_lives, height = _power_on_facts(rom_id)
+    return GameSpec(name=name, rom_id=rom_id, num_actions=num_actions, start_lives=start_lives,
+                    screen_height=height)
 
 
-def _power_on_facts(rom_id: str) -> tuple[int, int]:
-    """The size of the game's minimal action set and its lives at power-on, read from ALE with
-    the ROM loaded (one load for both)."""
+def _power_on_facts(rom_id: str) -> tuple[int, int, int]:
+    """The size of the game's minimal action set, its lives at power-on and its screen's rows,
+    read from ALE with the ROM loaded (one load for all)."""
     from ale_py import ALEInterface, LoggerMode, roms
 
     ALEInterface.setLoggerMode(LoggerMode.Error)
     ale = ALEInterface()
     ale.loadROM(roms.get_rom_path(rom_id))
-    return len(ale.getMinimalActionSet()), int(ale.lives())
+    return len(ale.getMinimalActionSet()), int(ale.lives()), int(ale.getScreenDims()[0])

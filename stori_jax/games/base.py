@@ -86,6 +86,25 @@ class EventRule:
     new_state: Callable[[], dict] = dict
 
 
+_CONDITIONS = {"==": np.equal, "!=": np.not_equal, "<": np.less, "<=": np.less_equal,
+               ">": np.greater, ">=": np.greater_equal}
+
+
+def ram_write_rule(address: int, values: tuple[int, ...], when) -> EventRule:
+    """The rule of a ``RamEvent``: after a frame (or a step's last), where ``when`` holds on
+    the RAM, with probability p write ``values[floor(u_choice * len(values))]`` to
+    ``address``."""
+    def post_frame(prev_ram, ram, start_ram, state, u, u_choice, p, episode_frame):
+        if when is not None and not _CONDITIONS[when[1]](int(ram[when[0]]), when[2]):
+            return NO_EVENT
+        if not u < p:
+            return NO_EVENT
+        value = values[min(int(u_choice * len(values)), len(values) - 1)]
+        return EventOutcome(writes={address: value}, fired=True)
+
+    return EventRule(f"RAM[{address}] <- {list(values)}", post_frame=post_frame)
+
+
 @dataclass(frozen=True)
 class BlackoutMode:
     name: str
@@ -117,6 +136,7 @@ class GameSpec:
     # name -> f(ram_int32[..., 128]) -> value; works on numpy and jax arrays alike
     labels: Mapping[str, Callable] = field(default_factory=dict)
     default_replacement_actions: tuple[int, ...] | None = None
+    screen_height: int = 210  # ALE's rows of its screen (AirRaid, Pacman: 250)
 
     # -- validation --------------------------------------------------------------------------
 
@@ -126,7 +146,7 @@ class GameSpec:
         if config.drift is not None:
             configs.append(("Config.drift.secondary", config.drift.secondary))
         for where, cfg in configs:
-            if cfg.event is not None:
+            if cfg.event is not None and hasattr(cfg.event, "mode"):  # RamEvent: any game
                 self._check_mode(f"{where}.event.mode", cfg.event.mode, self.event_modes,
                                  "event modes")
             mask = cfg.observation
