@@ -51,6 +51,35 @@ def _seaquest_reappearing_player(ram, boxes):
     return boxes._replace(x=x, y=y)
 
 
+def _crazy_climber_height(ram, boxes):
+    """OCAtari stretches the climber to 23 rows on the first climbing frame and never shrinks
+    it back (until the game restarts); unstretched (y 160) it is 21 rows."""
+    return boxes._replace(h=np.where(boxes.present & (boxes.y == 160), 21, boxes.h))
+
+
+def _demon_attack_missiles(ram, boxes):
+    """OCAtari puts each new enemy missile into the first slot, so only the last one of the
+    bitmap (rows RAM[37..46] from the bottom, high bit first) is left; this checks that one is
+    OCAtari's and gives them all (x from the column of RAM[20], as OCAtari's last one)."""
+    r = ram.astype(np.int32)
+    coarse, fine = r[:, 20] % 16, r[:, 20] >> 4
+    x0 = (coarse * 15 + np.where(fine > 7, 28 - fine, 12 - fine)) % 256
+    bits = np.unpackbits(ram[:, 37:47], axis=1).astype(bool)  # (T, 80): row, then column
+    rows, columns = np.divmod(np.arange(80), 8)
+    x, y = (x0[:, None] + columns) % 256, np.broadcast_to(179 - 8 * rows, bits.shape)
+    slots = boxes.x.shape[1]
+    full = repack(O.Boxes(x, y, np.ones_like(x), np.full_like(x, 4), bits),
+                  np.ones_like(bits))
+    count = bits.sum(1)
+    some = count > 0
+    last = np.maximum(count - 1, 0)[:, None]
+    assert (boxes.present.sum(1) == some).all()
+    for field in "xy":
+        got = np.take_along_axis(getattr(full, field), last, axis=1)[:, 0]
+        assert (got[some] == getattr(boxes, field)[some, 0]).all(), field
+    return O.Boxes(*(v[:, :slots] for v in full))
+
+
 OCATARI_ERRORS = {
     ("seaquest", "Player"): ("reports the start box on the frame the submarine reappears",
                              _seaquest_reappearing_player),
@@ -58,6 +87,10 @@ OCATARI_ERRORS = {
                            "last box", _asterix_empty_lanes),
     ("asterix", "Consumable"): ("keeps a consumable in a lane that empties at its last box",
                                 _asterix_empty_lanes),
+    ("crazy_climber", "Player"): ("keeps the climbing height once the climber is back to 160",
+                                  _crazy_climber_height),
+    ("demon_attack", "EnemyMissile"): ("keeps only the last missile of the bitmap",
+                                       _demon_attack_missiles),
 }
 
 
