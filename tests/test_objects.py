@@ -63,10 +63,10 @@ def _demon_attack_missiles(ram, boxes):
     OCAtari's and gives them all (x from the column of RAM[20], as OCAtari's last one)."""
     r = ram.astype(np.int32)
     coarse, fine = r[:, 20] % 16, r[:, 20] >> 4
-    x0 = (coarse * 15 + np.where(fine > 7, 28 - fine, 12 - fine)) % 256
+    x0 = coarse * 15 + np.where(fine > 7, 28 - fine, 12 - fine)
     bits = np.unpackbits(ram[:, 37:47], axis=1).astype(bool)  # (T, 80): row, then column
     rows, columns = np.divmod(np.arange(80), 8)
-    x, y = (x0[:, None] + columns) % 256, np.broadcast_to(179 - 8 * rows, bits.shape)
+    x, y = x0[:, None] + columns, np.broadcast_to(179 - 8 * rows, bits.shape)
     slots = boxes.x.shape[1]
     full = repack(O.Boxes(x, y, np.ones_like(x), np.full_like(x, 4), bits),
                   np.ones_like(bits))

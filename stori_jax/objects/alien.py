@@ -18,13 +18,13 @@ def _maze(r):  # RAM[0] == 0: the maze; else the bonus stage, not covered
 
 @obj("Player")
 def player(r):
-    return (r[:, 52] + 18) % 256, (197 - 2 * r[:, 45]) % 256, 6, 13, True
+    return r[:, 52] + 18, 197 - 2 * r[:, 45], 6, 13, True
 
 
 @obj("Alien", 12)
 def alien(r):
     y, x = r[:, 42:45], r[:, 49:52]
-    return (x + 17) % 256, (196 - 2 * y) % 256, 8, 13, (y != 0) & (x != 0) & _maze(r)[:, None]
+    return (x + 17), (196 - 2 * y), 8, 13, (y != 0) & (x != 0) & _maze(r)[:, None]
 
 
 @obj("Pulsar")
@@ -37,7 +37,7 @@ def pulsar(r):
 @obj("Rocket")
 def rocket(r):
     y = r[:, 47]
-    return 17 + 15 * (r[:, 60] & 7), (197 - 2 * y) % 256, 8, 5, (y != 0) & _maze(r)
+    return 17 + 15 * (r[:, 60] & 7), 197 - 2 * y, 8, 5, (y != 0) & _maze(r)
 
 
 @obj("Egg", 156)

@@ -53,6 +53,6 @@ def enemy_red(r):  # RAM[14]: its column, RAM[15]: its row, RAM[16]: its height
 
 GAME = table("crazy_climber", player, window, enemy_red,
              notes="Player: OCAtari keeps the stretched height (23) on later frames; here it "
-                   "follows the RAM of its frame. The bird, the helicopter and the falling objects are left out: OCAtari's "
-                   "boxes for them depend on earlier frames (their facing), and none of them "
-                   "appears in the fixture.")
+                   "follows the RAM of its frame.  The bird, the helicopter and the falling "
+                   "objects are left out: OCAtari's boxes for them depend on earlier frames "
+                   "(their facing), and none of them appears in the fixture.")

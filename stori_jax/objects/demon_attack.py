@@ -12,7 +12,7 @@ MISSILE_ROWS = 10
 
 def column_x(value):  # a horizontal position byte: coarse in the low nibble, fine in the high
     coarse, fine = value % 16, value >> 4
-    return (coarse * 15 + where(fine > 7, 28 - fine, 12 - fine)) % 256
+    return (coarse * 15 + where(fine > 7, 28 - fine, 12 - fine))
 
 
 @obj("Player")
@@ -23,12 +23,12 @@ def player(r):
 @obj("PlayerMissile")
 def player_missile(r):
     y = r[:, 21]
-    return (2 + column_x(r[:, 22])) % 256, (where(y >= 90, 176, 178) - y) % 256, 1, 8, True
+    return 2 + column_x(r[:, 22]), where(y >= 90, 176, 178) - y, 1, 8, True
 
 
 def _rows(r):
     state = at(r, range(29, 29 + ROWS))  # > 24: split in two, > 3: whole, > 0: taking shape
-    y = (175 - at(r, range(69, 69 + ROWS))) % 256
+    y = (175 - at(r, range(69, 69 + ROWS)))
     return (state, column_x(at(r, range(13, 13 + ROWS))), column_x(at(r, range(17, 17 + ROWS))),
             y)
 
@@ -47,7 +47,7 @@ def enemy(r):  # per row its left and right demon, then the diving demon
     ys = jnp.repeat(y, 2, axis=1)
     here = jnp.stack([left, right], axis=2).reshape(-1, 2 * ROWS)
     return (jnp.concatenate([x, column_x(r[:, 20:21])], 1),
-            jnp.concatenate([ys, (177 - r[:, 72:73]) % 256], 1),
+            jnp.concatenate([ys, (177 - r[:, 72:73])], 1),
             jnp.concatenate([w, jnp.full_like(w[:, :1], 8)], 1), 7,
             jnp.concatenate([here, diving[:, None]], 1))
 
@@ -65,7 +65,7 @@ def enemy_missile(r):  # row i (from the bottom), column k (the byte's bits, hig
     i = jnp.repeat(jnp.arange(MISSILE_ROWS), 8)
     k = jnp.tile(jnp.arange(8), MISSILE_ROWS)
     here = (r[:, 37 + i] >> (7 - k)) & 1 == 1
-    return (column_x(r[:, 20:21]) + k) % 256, 179 - 8 * i, 1, 4, here
+    return (column_x(r[:, 20:21]) + k), 179 - 8 * i, 1, 4, here
 
 
 GAME = table("demon_attack", player, player_missile, enemy, enemy_part, enemy_missile,
