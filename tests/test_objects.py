@@ -80,6 +80,33 @@ def _demon_attack_missiles(ram, boxes):
     return O.Boxes(*(v[:, :slots] for v in full))
 
 
+def _appearing(start, candidates):
+    """A fix for a class whose new objects OCAtari places at their ``start`` box on the frame
+    they appear (present in slot k, not the frame before): there they get the box of the k-th
+    present one of ``candidates(r) -> (x, y, present)`` (T, C), from the RAM of that frame."""
+    def fix(ram, boxes):
+        x, y, present = candidates(ram.astype(np.int32))
+        right = repack(O.Boxes(x, y, np.zeros_like(x), np.zeros_like(x), present), present)
+        slots = boxes.x.shape[1]
+        new = boxes.present & ~np.r_[np.zeros((1, slots), bool), boxes.present[:-1]]
+        assert (boxes.x[new] == start[0]).all() and (boxes.y[new] == start[1]).all()
+        return boxes._replace(x=np.where(new, right.x[:, :slots], boxes.x),
+                              y=np.where(new, right.y[:, :slots], boxes.y))
+    return fix
+
+
+def _ms_pacman_ghosts(r):
+    out = (r[:, 47:48] > 0) & (np.arange(4) <= r[:, 19:20])
+    return r[:, 6:10] - 13, r[:, 12:16] + 1, out
+
+
+def _ms_pacman_power_pills(r):
+    bits = np.array([2, 3, 4, 5])
+    x, y = np.array([148, 148, 8, 8]), np.array([146, 14, 147, 15])
+    present = (r[:, 117:118] >> bits) & 1 == 1
+    return np.broadcast_to(x, present.shape), np.broadcast_to(y, present.shape), present
+
+
 OCATARI_ERRORS = {
     ("seaquest", "Player"): ("reports the start box on the frame the submarine reappears",
                              _seaquest_reappearing_player),
@@ -91,6 +118,10 @@ OCATARI_ERRORS = {
                                   _crazy_climber_height),
     ("demon_attack", "EnemyMissile"): ("keeps only the last missile of the bitmap",
                                        _demon_attack_missiles),
+    ("ms_pacman", "Ghost"): ("gives a ghost the box (0, 0) on the frame it appears",
+                             _appearing((0, 0), _ms_pacman_ghosts)),
+    ("ms_pacman", "PowerPill"): ("gives a power pill the box (125, 173) on the frame it appears",
+                                 _appearing((125, 173), _ms_pacman_power_pills)),
 }
 
 

@@ -28,8 +28,9 @@ RAM_SIZE = 128
 GAMES = (
     "air_raid", "alien", "asterix", "bank_heist", "bowling", "boxing", "breakout",
     "crazy_climber", "demon_attack", "donkey_kong", "double_dunk", "fishing_derby", "freeway",
-    "galaxian", "gopher", "ice_hockey", "jamesbond", "mario_bros", "name_this_game", "pacman",
-    "pong", "seaquest", "star_gunner", "tennis", "up_n_down", "video_pinball", "yars_revenge",
+    "galaxian", "gopher", "ice_hockey", "jamesbond", "mario_bros", "ms_pacman", "name_this_game",
+    "pacman", "pong", "seaquest", "star_gunner", "tennis", "up_n_down", "video_pinball",
+    "yars_revenge",
 )
 
 
