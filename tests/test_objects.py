@@ -107,6 +107,21 @@ def _ms_pacman_power_pills(r):
     return np.broadcast_to(x, present.shape), np.broadcast_to(y, present.shape), present
 
 
+def _riverraid_river(height):
+    """OCAtari keeps the height an object was cut to at the top row (2) on the frames after it,
+    lower than the object is (below row 2 it is whole again, cut only at row 162 below); and it
+    puts a new object into the slot after the last one taken, the first after the fourth, so its
+    order is not always the river's (lowest on the screen first)."""
+    def fix(ram, boxes):
+        whole = np.where(boxes.y + height >= 162, 163 - boxes.y, height)
+        below = boxes.present & (boxes.y > 2)
+        assert (boxes.h[below] <= whole[below]).all()
+        boxes = boxes._replace(h=np.where(below, whole, boxes.h))
+        order = np.argsort(np.where(boxes.present, -boxes.y, 1), axis=1, kind="stable")
+        return O.Boxes(*(np.take_along_axis(v, order, axis=1) for v in boxes))
+    return fix
+
+
 OCATARI_ERRORS = {
     ("seaquest", "Player"): ("reports the start box on the frame the submarine reappears",
                              _seaquest_reappearing_player),
@@ -122,6 +137,10 @@ OCATARI_ERRORS = {
                              _appearing((0, 0), _ms_pacman_ghosts)),
     ("ms_pacman", "PowerPill"): ("gives a power pill the box (125, 173) on the frame it appears",
                                  _appearing((125, 173), _ms_pacman_power_pills)),
+    **{("riverraid", name): (f"keeps a cut height and its own order of the {what}",
+                             _riverraid_river(height))
+       for name, what, height in (("FuelDepot", "fuel depots", 24), ("Tanker", "tankers", 9),
+                                  ("Helicopter", "helicopters", 10), ("House", "houses", 20))},
 }
 
 
