@@ -122,6 +122,19 @@ def _riverraid_river(height):
     return fix
 
 
+def _road_runner_first_coyote(ram, boxes):
+    """OCAtari's coyote starts as no object and is made only once it has left the road
+    (RAM[81] > 143), so before that it is missing, though on the screen (the RAM's box)."""
+    r = ram.astype(np.int32)
+    before = np.cumsum(r[:, 81] > 143) == 0
+    assert not boxes.present[before].any()
+    here = before & (r[:, 81] <= 143)
+    y = r[:, 5] + np.where(r[:, 22] == 1, -30, 98)
+    return O.Boxes(*(np.where(here[:, None], v[:, None], old)
+                     for v, old in zip((r[:, 81], y, np.full_like(y, 7), np.full_like(y, 29),
+                                        here), boxes)))
+
+
 OCATARI_ERRORS = {
     ("seaquest", "Player"): ("reports the start box on the frame the submarine reappears",
                              _seaquest_reappearing_player),
@@ -141,6 +154,8 @@ OCATARI_ERRORS = {
                              _riverraid_river(height))
        for name, what, height in (("FuelDepot", "fuel depots", 24), ("Tanker", "tankers", 9),
                                   ("Helicopter", "helicopters", 10), ("House", "houses", 20))},
+    ("road_runner", "Enemy"): ("misses the coyote until it first leaves the road",
+                               _road_runner_first_coyote),
 }
 
 
