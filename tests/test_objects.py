@@ -135,6 +135,21 @@ def _road_runner_first_coyote(ram, boxes):
                                         here), boxes)))
 
 
+def _frogger_cars(ram, boxes):
+    """OCAtari lists 26 cars, all of them present on every frame: the 14 after the twelfth it
+    never places (at (0, 0)); a car of lanes 1 to 4 whose position (RAM) is off the road (0 or
+    past 154) it keeps at its last box; and it gives a car cut to nothing a width <= 0."""
+    r = ram.astype(np.int32)
+    assert boxes.present.all()
+    pos = np.stack([r[:, 11], r[:, 0], r[:, 12], r[:, 1], r[:, 13], (r[:, 13] + 32) % 160,
+                    r[:, 2], (r[:, 13] + 112) % 160, r[:, 14], r[:, 3]], 1)
+    on_road = np.ones(boxes.present.shape, bool)
+    on_road[:, :10] = (1 <= pos) & (pos <= 154)
+    on_road[:, 12:] = False
+    assert (boxes.x[:, 12:] == 0).all() and (boxes.y[:, 12:] == 0).all()
+    return repack(boxes, on_road & (boxes.w > 0))
+
+
 OCATARI_ERRORS = {
     ("seaquest", "Player"): ("reports the start box on the frame the submarine reappears",
                              _seaquest_reappearing_player),
@@ -154,6 +169,8 @@ OCATARI_ERRORS = {
                              _riverraid_river(height))
        for name, what, height in (("FuelDepot", "fuel depots", 24), ("Tanker", "tankers", 9),
                                   ("Helicopter", "helicopters", 10), ("House", "houses", 20))},
+    ("frogger", "Car"): ("never places 14 of its cars, keeps cars off the road and cars of "
+                         "width <= 0", _frogger_cars),
     ("road_runner", "Enemy"): ("misses the coyote until it first leaves the road",
                                _road_runner_first_coyote),
 }
