@@ -31,7 +31,7 @@ GAMES = (
     "galaxian", "gopher", "ice_hockey", "jamesbond", "mario_bros", "ms_pacman", "name_this_game",
     "pacman", "pong", "seaquest", "star_gunner", "tennis", "up_n_down", "video_pinball",
     "yars_revenge",
-    "riverraid", "frostbite", "kung_fu_master", "road_runner", "frogger", "pitfall",
+    "riverraid", "frostbite", "kung_fu_master", "road_runner", "frogger", "pitfall", "venture",
 )
 
 
