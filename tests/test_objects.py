@@ -51,6 +51,105 @@ def _seaquest_reappearing_player(ram, boxes):
     return boxes._replace(x=x, y=y)
 
 
+def _crazy_climber_height(ram, boxes):
+    """OCAtari stretches the climber to 23 rows on the first climbing frame and never shrinks
+    it back (until the game restarts); unstretched (y 160) it is 21 rows."""
+    return boxes._replace(h=np.where(boxes.present & (boxes.y == 160), 21, boxes.h))
+
+
+def _demon_attack_missiles(ram, boxes):
+    """OCAtari puts each new enemy missile into the first slot, so only the last one of the
+    bitmap (rows RAM[37..46] from the bottom, high bit first) is left; this checks that one is
+    OCAtari's and gives them all (x from the column of RAM[20], as OCAtari's last one)."""
+    r = ram.astype(np.int32)
+    coarse, fine = r[:, 20] % 16, r[:, 20] >> 4
+    x0 = coarse * 15 + np.where(fine > 7, 28 - fine, 12 - fine)
+    bits = np.unpackbits(ram[:, 37:47], axis=1).astype(bool)  # (T, 80): row, then column
+    rows, columns = np.divmod(np.arange(80), 8)
+    x, y = x0[:, None] + columns, np.broadcast_to(179 - 8 * rows, bits.shape)
+    slots = boxes.x.shape[1]
+    full = repack(O.Boxes(x, y, np.ones_like(x), np.full_like(x, 4), bits),
+                  np.ones_like(bits))
+    count = bits.sum(1)
+    some = count > 0
+    last = np.maximum(count - 1, 0)[:, None]
+    assert (boxes.present.sum(1) == some).all()
+    for field in "xy":
+        got = np.take_along_axis(getattr(full, field), last, axis=1)[:, 0]
+        assert (got[some] == getattr(boxes, field)[some, 0]).all(), field
+    return O.Boxes(*(v[:, :slots] for v in full))
+
+
+def _appearing(start, candidates):
+    """A fix for a class whose new objects OCAtari places at their ``start`` box on the frame
+    they appear (present in slot k, not the frame before): there they get the box of the k-th
+    present one of ``candidates(r) -> (x, y, present)`` (T, C), from the RAM of that frame."""
+    def fix(ram, boxes):
+        x, y, present = candidates(ram.astype(np.int32))
+        right = repack(O.Boxes(x, y, np.zeros_like(x), np.zeros_like(x), present), present)
+        slots = boxes.x.shape[1]
+        new = boxes.present & ~np.r_[np.zeros((1, slots), bool), boxes.present[:-1]]
+        assert (boxes.x[new] == start[0]).all() and (boxes.y[new] == start[1]).all()
+        return boxes._replace(x=np.where(new, right.x[:, :slots], boxes.x),
+                              y=np.where(new, right.y[:, :slots], boxes.y))
+    return fix
+
+
+def _ms_pacman_ghosts(r):
+    out = (r[:, 47:48] > 0) & (np.arange(4) <= r[:, 19:20])
+    return r[:, 6:10] - 13, r[:, 12:16] + 1, out
+
+
+def _ms_pacman_power_pills(r):
+    bits = np.array([2, 3, 4, 5])
+    x, y = np.array([148, 148, 8, 8]), np.array([146, 14, 147, 15])
+    present = (r[:, 117:118] >> bits) & 1 == 1
+    return np.broadcast_to(x, present.shape), np.broadcast_to(y, present.shape), present
+
+
+def _riverraid_river(height):
+    """OCAtari keeps the height an object was cut to at the top row (2) on the frames after it,
+    lower than the object is (below row 2 it is whole again, cut only at row 162 below); and it
+    puts a new object into the slot after the last one taken, the first after the fourth, so its
+    order is not always the river's (lowest on the screen first)."""
+    def fix(ram, boxes):
+        whole = np.where(boxes.y + height >= 162, 163 - boxes.y, height)
+        below = boxes.present & (boxes.y > 2)
+        assert (boxes.h[below] <= whole[below]).all()
+        boxes = boxes._replace(h=np.where(below, whole, boxes.h))
+        order = np.argsort(np.where(boxes.present, -boxes.y, 1), axis=1, kind="stable")
+        return O.Boxes(*(np.take_along_axis(v, order, axis=1) for v in boxes))
+    return fix
+
+
+def _road_runner_first_coyote(ram, boxes):
+    """OCAtari's coyote starts as no object and is made only once it has left the road
+    (RAM[81] > 143), so before that it is missing, though on the screen (the RAM's box)."""
+    r = ram.astype(np.int32)
+    before = np.cumsum(r[:, 81] > 143) == 0
+    assert not boxes.present[before].any()
+    here = before & (r[:, 81] <= 143)
+    y = r[:, 5] + np.where(r[:, 22] == 1, -30, 98)
+    return O.Boxes(*(np.where(here[:, None], v[:, None], old)
+                     for v, old in zip((r[:, 81], y, np.full_like(y, 7), np.full_like(y, 29),
+                                        here), boxes)))
+
+
+def _frogger_cars(ram, boxes):
+    """OCAtari lists 26 cars, all of them present on every frame: the 14 after the twelfth it
+    never places (at (0, 0)); a car of lanes 1 to 4 whose position (RAM) is off the road (0 or
+    past 154) it keeps at its last box; and it gives a car cut to nothing a width <= 0."""
+    r = ram.astype(np.int32)
+    assert boxes.present.all()
+    pos = np.stack([r[:, 11], r[:, 0], r[:, 12], r[:, 1], r[:, 13], (r[:, 13] + 32) % 160,
+                    r[:, 2], (r[:, 13] + 112) % 160, r[:, 14], r[:, 3]], 1)
+    on_road = np.ones(boxes.present.shape, bool)
+    on_road[:, :10] = (1 <= pos) & (pos <= 154)
+    on_road[:, 12:] = False
+    assert (boxes.x[:, 12:] == 0).all() and (boxes.y[:, 12:] == 0).all()
+    return repack(boxes, on_road & (boxes.w > 0))
+
+
 OCATARI_ERRORS = {
     ("seaquest", "Player"): ("reports the start box on the frame the submarine reappears",
                              _seaquest_reappearing_player),
@@ -58,6 +157,22 @@ OCATARI_ERRORS = {
                            "last box", _asterix_empty_lanes),
     ("asterix", "Consumable"): ("keeps a consumable in a lane that empties at its last box",
                                 _asterix_empty_lanes),
+    ("crazy_climber", "Player"): ("keeps the climbing height once the climber is back to 160",
+                                  _crazy_climber_height),
+    ("demon_attack", "EnemyMissile"): ("keeps only the last missile of the bitmap",
+                                       _demon_attack_missiles),
+    ("ms_pacman", "Ghost"): ("gives a ghost the box (0, 0) on the frame it appears",
+                             _appearing((0, 0), _ms_pacman_ghosts)),
+    ("ms_pacman", "PowerPill"): ("gives a power pill the box (125, 173) on the frame it appears",
+                                 _appearing((125, 173), _ms_pacman_power_pills)),
+    **{("riverraid", name): (f"keeps a cut height and its own order of the {what}",
+                             _riverraid_river(height))
+       for name, what, height in (("FuelDepot", "fuel depots", 24), ("Tanker", "tankers", 9),
+                                  ("Helicopter", "helicopters", 10), ("House", "houses", 20))},
+    ("frogger", "Car"): ("never places 14 of its cars, keeps cars off the road and cars of "
+                         "width <= 0", _frogger_cars),
+    ("road_runner", "Enemy"): ("misses the coyote until it first leaves the road",
+                               _road_runner_first_coyote),
 }
 
 

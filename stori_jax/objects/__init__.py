@@ -27,10 +27,12 @@ SCREEN_HEIGHT, SCREEN_WIDTH = 210, 160
 
 # the ALE ROM id of every covered game (its module's name)
 GAMES = (
-    "air_raid", "asterix", "bank_heist", "bowling", "boxing", "breakout", "donkey_kong",
-    "double_dunk", "fishing_derby", "freeway", "galaxian", "gopher", "ice_hockey", "jamesbond",
-    "name_this_game", "pacman", "pong", "seaquest", "star_gunner", "tennis", "up_n_down",
-    "video_pinball",
+    "air_raid", "alien", "asterix", "bank_heist", "bowling", "boxing", "breakout",
+    "crazy_climber", "demon_attack", "donkey_kong", "double_dunk", "fishing_derby", "freeway",
+    "galaxian", "gopher", "ice_hockey", "jamesbond", "mario_bros", "ms_pacman", "name_this_game",
+    "pacman", "pong", "seaquest", "star_gunner", "tennis", "up_n_down", "video_pinball",
+    "yars_revenge",
+    "riverraid", "frostbite", "kung_fu_master", "road_runner", "frogger", "pitfall", "venture",
 )
 
 
@@ -108,9 +110,13 @@ def _evaluate(cls: ObjectClass, r) -> Boxes:
         if v.ndim == 1 and cls.slots == 1:  # one object: (B,) per env
             v = v[:, None]  # (with several slots, a 1-D array is one value per slot)
         parts.append(v)
-    width = max([cls.slots] + [v.shape[-1] for v in parts if v.ndim])
+    width = max([1] + [v.shape[-1] for v in parts if v.ndim])
     x, y, w, h, present = (jnp.broadcast_to(v, (batch, width)) for v in parts)
     present = present.astype(bool)
+    if width < cls.slots:  # fewer candidates than slots: the rest are absent
+        x, y, w, h, present = (jnp.pad(v, ((0, 0), (0, cls.slots - width)))
+                               for v in (x, y, w, h, present))
+        width = cls.slots
     x, y, w, h = (jnp.where(present, v, 0).astype(jnp.int32) for v in (x, y, w, h))
     if width > 1:  # present objects first, in the formula's order; at most `slots` of them
         order = jnp.argsort(~present, axis=1, stable=True)[:, :cls.slots]

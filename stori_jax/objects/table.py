@@ -5,7 +5,8 @@ batch as int32 of shape (B, 128) (so no uint8 arithmetic wraps), and each of the
 is a number, a (B, slots) array (one column per slot), a (slots,) array (one value per slot,
 the same in every env) or, for a class of one slot, a (B,) array; written with ``jnp``.  A
 formula may give more columns than the class has slots (candidates, e.g. every RAM slot that
-may hold the class): the first ``slots`` present ones are kept.  :func:`stori_jax.objects.objects_of` broadcasts them to (B, slots), zeroes the
+may hold the class): the first ``slots`` present ones are kept; fewer columns than slots leave
+the rest absent.  :func:`stori_jax.objects.objects_of` broadcasts them to (B, slots), zeroes the
 boxes of absent slots and moves the present objects to the front (stably, so their order is the
 formula's order, which is OCAtari's list order).
 
