@@ -107,6 +107,13 @@ def _ms_pacman_power_pills(r):
     return np.broadcast_to(x, present.shape), np.broadcast_to(y, present.shape), present
 
 
+def _battle_zone_crosshair(ram, boxes):
+    """The crosshair (78, 79, 1, 6) is drawn on every frame; OCAtari's object list holds it in
+    the slot the first enemy takes when it appears, and then never again."""
+    here = np.ones_like(boxes.present)
+    return O.Boxes(*(np.full_like(boxes.x, v) for v in (78, 79, 1, 6)), here)
+
+
 OCATARI_ERRORS = {
     ("seaquest", "Player"): ("reports the start box on the frame the submarine reappears",
                              _seaquest_reappearing_player),
@@ -122,6 +129,8 @@ OCATARI_ERRORS = {
                              _appearing((0, 0), _ms_pacman_ghosts)),
     ("ms_pacman", "PowerPill"): ("gives a power pill the box (125, 173) on the frame it appears",
                                  _appearing((125, 173), _ms_pacman_power_pills)),
+    ("battle_zone", "Crosshair"): ("drops the crosshair once the first enemy appears",
+                                   _battle_zone_crosshair),
 }
 
 
