@@ -188,6 +188,22 @@ def _skiing(kind):
     return fix
 
 
+def _montezuma_key_on_entering(ram, boxes):
+    """OCAtari builds a room's layout on the frame the room is entered (the first frame, or
+    RAM[3] changes) after its items, and clears them with it: the key (RAM[49] == 4, lit room)
+    is missing on that frame only.  This checks it is and gives the RAM's key there."""
+    r = ram.astype(np.int32)
+    entering = np.r_[True, r[1:, 3] != r[:-1, 3]]
+    assert not boxes.present[entering].any()
+    room, low = r[:, 3], r[:, 45]
+    base = np.select([room == 0, room == 1, room == 7], [55, 98, 54], 53)
+    y = base + 255 - low + np.where(low < 216, 4, 0)
+    key = entering & (r[:, 49] == 4) & ((room < 16) | (r[:, 65] & 128 != 0))
+    fields = [np.where(key, v, f[:, 0])[:, None]
+              for v, f in zip((r[:, 44] - 1, y, 7, 15), boxes[:4])]
+    return O.Boxes(*fields, boxes.present | key[:, None])
+
+
 OCATARI_ERRORS = {
     ("seaquest", "Player"): ("reports the start box on the frame the submarine reappears",
                              _seaquest_reappearing_player),
@@ -211,6 +227,8 @@ OCATARI_ERRORS = {
     ("skiing", "Tree"): ("orders by history; first boxes; keeps a tree's column", _skiing(85)),
     ("skiing", "Mogul"): ("orders by history; first boxes", _skiing(5)),
     ("skiing", "Flag"): ("orders by history; first boxes", _skiing(2)),
+    ("montezuma_revenge", "Key"): ("has no key on the frame a room is entered",
+                                   _montezuma_key_on_entering),
 }
 
 

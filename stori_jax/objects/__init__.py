@@ -31,7 +31,7 @@ GAMES = (
     "galaxian", "gopher", "ice_hockey", "jamesbond", "mario_bros", "ms_pacman", "name_this_game",
     "pacman", "pong", "seaquest", "star_gunner", "tennis", "up_n_down", "video_pinball",
     "yars_revenge",
-    "private_eye", "battle_zone", "phoenix", "skiing", "kangaroo",
+    "private_eye", "battle_zone", "phoenix", "skiing", "kangaroo", "montezuma_revenge",
 )
 
 

@@ -5,7 +5,7 @@ import jax.numpy as jnp
 
 from stori_jax.objects.table import obj, table
 
-# the blue tank's sprite RAM[46] -> (dx, dy, dw, dh) from the box (RAM[48] + 1, 97 - RAM[47], 16, 10)
+# the blue tank's sprite RAM[46] -> (dx, dy, dw, dh) on the box (RAM[48] + 1, 97 - RAM[47], 16, 10)
 TANK_SPRITES = {6: (3, -1, -12, -6), 7: (2, -1, -11, -6), 11: (1, -1, -10, -6),
                 12: (-1, -1, -8, -5), 13: (-1, -1, -8, -5), 18: (4, 0, -4, -3),
                 21: (0, 0, -5, -1), 26: (0, 0, -4, 0), 27: (4, 0, -4, 0), 28: (2, 0, -2, 0),

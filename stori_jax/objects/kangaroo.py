@@ -96,5 +96,5 @@ def platform(r):
 GAME = table("kangaroo", player, child, monkey, falling_coconut, thrown_coconut, fruit, bell,
              ladder, platform,
              notes="The child is where RAM[83] says on every frame; OCAtari moves it only on "
-                   "some frames (the mother below row 4, or RAM[68] equal to the fruit count) "
+                   "some frames (the mother's row RAM[16] past 3, or RAM[68] the fruit count) "
                    "and brings back the bell only when the game restarts.")
