@@ -33,6 +33,7 @@ GAMES = (
     "pacman", "pong", "seaquest", "star_gunner", "tennis", "up_n_down", "video_pinball",
     "yars_revenge",
     "riverraid", "frostbite", "kung_fu_master", "road_runner", "frogger", "pitfall", "venture",
+    "private_eye", "battle_zone", "phoenix", "skiing", "kangaroo", "montezuma_revenge",
 )
 
 
