@@ -1145,3 +1145,16 @@ def test_a_step_profile_has_a_row_per_frame_work_placement_and_its_options_in_th
     rows = table(md.read_text())
     assert len(rows) == len(asked) and rows[0]["split (workers + here)"] == "1 + 8"
     assert rows[0]["send"] == "1.00" and rows[0]["CPU workers"] == "10.00"
+
+
+def test_the_objects_benchmark_writes_its_rows(monkeypatch, tmp_path):
+    """One smoke run of objects_throughput.py (tiny batch): a row per variant, JSON + table +
+    plot written."""
+    bench = script(monkeypatch, "objects_throughput")
+    bench.main(["--games", "Breakout", "--batch", "2", "--steps", "2", "--repeats", "1",
+                "--out", str(tmp_path)])
+    written = sorted(p.suffix for p in tmp_path.iterdir())
+    assert written == [".json", ".md", ".png"]
+    results = json.loads(next(tmp_path.glob("*.json")).read_text())["results"]["Breakout"]
+    assert list(results) == ["3.1 raw", "objects", "3.1 atari84", "hide Ball atari84"]
+    assert all(rate > 0 for rate in results.values())

@@ -4,7 +4,7 @@ player's missile, the oxygen bar and the collected divers."""
 
 import jax.numpy as jnp
 
-from stori_jax.objects.table import at, obj, table, where
+from stori_jax.objects.table import at, obj, table
 
 LANES, PER_LANE = 4, 3
 
