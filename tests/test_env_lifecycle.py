@@ -531,7 +531,7 @@ def test_step_before_reset_and_send_recv_misuse():
     (dict(game="NoSuchGame"), r"unknown game 'NoSuchGame'.*Breakout"),
     (dict(game="Breakout", preset="9.9"), r"unknown preset '9.9' for Breakout.*3\.2A"),
     (dict(game="Breakout", obs="rgb"), r"obs must be one of \['raw', 'atari84', 'dreamer64', "
-                                       r"'ram'\], got 'rgb'"),
+                                       r"'ram', 'objects'\], got 'rgb'"),
     (dict(game="Breakout", num_envs=2, num_workers=3), r"num_workers must be <= num_envs \(2\)"),
     (dict(game="Breakout", num_workers=-1), r"num_workers must be >= 0, got -1"),
     (dict(game="Breakout", num_envs=3, num_workers=0, inline_envs=1),
@@ -557,7 +557,7 @@ def test_step_before_reset_and_send_recv_misuse():
     (dict(game="Breakout", seed=1.5), r"seed must be an int"),
     (dict(game="Breakout", preset="1", config=Config()), r"either preset or config"),
     (dict(game="Breakout", config=Config(ram_observation=True), obs="raw"),
-     r"type 0.*obs must be 'ram'"),
+     r"type 0.*obs must be one of \['ram', 'objects'\], got 'raw'"),
     (dict(game="Breakout", config=Config(observation=ObservationMask("blackout", 1)), obs="ram"),
      r"obs='ram' cannot show an observation mask \(type 3\.2, Config\.observation\)"),
     (dict(game="Gopher", obs="ram", config=Config(drift=ConceptDrift(

@@ -323,7 +323,11 @@ class SubprocBackend:
         """Record the reply (or the death) of the worker whose pipe or sentinel ``obj`` is."""
         if obj in sentinels:
             w = sentinels[obj]
-            if w in waiting and not waiting[w].poll():
+            try:
+                replied = w in waiting and waiting[w].poll()
+            except OSError:  # its pipe closed under this wait: close() from another thread
+                replied = False
+            if w in waiting and not replied:
                 self._raise_dead(w, f"during {what}")
             return
         w = next(k for k, c in waiting.items() if c is obj)

@@ -44,8 +44,12 @@ def _squash(name: str) -> str:
 @functools.lru_cache(maxsize=None)
 def _tables() -> dict[str, GameObjects]:
     tables = {}
-    for rom_id in GAMES:
-        game = importlib.import_module(f"stori_jax.objects.{rom_id}").GAME
+    # the tables' constants are made here, concrete, even where the first use is inside a
+    # jit's trace (there jnp would make them tracers, which would leak)
+    with jax.ensure_compile_time_eval():
+        modules = [importlib.import_module(f"stori_jax.objects.{rom_id}") for rom_id in GAMES]
+    for rom_id, module in zip(GAMES, modules):
+        game = module.GAME
         assert game.rom_id == rom_id, (rom_id, game.rom_id)
         tables[rom_id] = game
     return tables
