@@ -165,7 +165,8 @@ def main(argv=None) -> None:
     print(f"wrote {args.out / stem}.json, .md and .png")
 
 
-def plot(rows: list[tuple[str, float]], path: Path, title: str) -> None:
+def plot(rows: list[tuple[str, float]], path: Path, title: str,
+         xlabel: str = "agent steps / s") -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -176,7 +177,7 @@ def plot(rows: list[tuple[str, float]], path: Path, title: str) -> None:
     ax.barh(range(len(rows)), rates, color="tab:blue")
     ax.set_yticks(range(len(rows)), names, fontsize=8)
     ax.invert_yaxis()
-    ax.set_xlabel("agent steps / s")
+    ax.set_xlabel(xlabel)
     ax.set_title(title, fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
