@@ -103,8 +103,8 @@ def stages(config: drq.DrQConfig, num_actions: int, repeats: int) -> dict[str, f
         "  replay sample + n-step transitions": median_ms(lambda: ready(sample(replay, key)),
                                                          repeats),
         "  augmentation (both stacks)": median_ms(lambda: ready(augment(batch, key)), repeats),
-        "  loss forward (2 network passes: s, s')": median_ms(lambda: ready(forward(params, augmented)),
-                                                       repeats),
+        "  loss forward (2 network passes: s, s')": median_ms(
+            lambda: ready(forward(params, augmented)), repeats),
         "  loss forward + backward": median_ms(lambda: ready(grad(params, augmented)), repeats),
         "  optimizer (Adam) + apply": median_ms(lambda: ready(optimize(state, grads)), repeats),
         "act (epsilon-greedy, the batch)": median_ms(
