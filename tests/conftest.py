@@ -62,3 +62,48 @@ def python_handles_ctrl_c():
     finally:
         if handler is not None:
             signal.signal(signal.SIGINT, handler)
+
+
+RERUN_AFTER_A_CRASH: set[str] = set()
+
+
+def _how_the_worker_ended(report) -> str:
+    """The dead xdist worker's exit status in words (a signal's name when one killed it) and the
+    machine's available memory: what tells a segfault from an OOM kill from an exit."""
+    import signal
+
+    popen = getattr(getattr(getattr(getattr(report, "node", None), "gateway", None), "_io", None),
+                    "popen", None)
+    try:
+        code = popen.wait(timeout=5) if popen is not None else None
+    except Exception:  # still running, or no longer ours to wait for
+        code = None
+    ended = ("exit status unknown" if code is None else f"exit code {code}" if code >= 0
+             else f"killed by {signal.Signals(-code).name}")
+    try:
+        available = next(line.split()[1] for line in open("/proc/meminfo")
+                         if line.startswith("MemAvailable"))
+        return f"{ended}, {int(available) // 1024} MiB of memory available"
+    except (OSError, StopIteration):
+        return ended
+
+
+def pytest_handlecrashitem(crashitem, report, sched):
+    """A test whose xdist worker died is run once more, in the fresh worker xdist starts, and the
+    run says so (``R`` and a line naming the test and how the worker ended); a second death
+    fails it.  An in-process JAX test (a training run's replay, a drift picture) has lost its
+    worker at the end of a few full runs, silently, and never when run again."""
+    ended = _how_the_worker_ended(report)
+    again = crashitem not in RERUN_AFTER_A_CRASH
+    RERUN_AFTER_A_CRASH.add(crashitem)
+    print(f"\n[conftest] the worker running {crashitem} died ({ended}); "
+          + ("running it again in a fresh worker" if again else "it died there too: failed"),
+          flush=True)
+    if again:
+        sched.mark_test_pending(crashitem)
+        report.outcome = "rerun"
+
+
+def pytest_report_teststatus(report):
+    if report.outcome == "rerun":
+        return "rerun", "R", "RERUN"
