@@ -878,7 +878,8 @@ env.reset()
 pid = os.fork()
 if pid == 0:  # the child: the env is the parent's; using it is refused, dropping it is harmless
     import signal
-    signal.alarm(60)  # should the refusal regress into a hang, the child does not outlive us
+    # a hang (the refusal regressed, or JAX's exit in a forked child) ends in 15 s, not 60
+    signal.alarm(15)
     try:
         env.step(np.zeros(2, np.int32))
         print("child stepped the parent's env", flush=True)
