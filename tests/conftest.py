@@ -81,18 +81,19 @@ def _how_the_worker_ended(report) -> str:
     ended = ("exit status unknown" if code is None else f"exit code {code}" if code >= 0
              else f"killed by {signal.Signals(-code).name}")
     try:
-        available = next(line.split()[1] for line in open("/proc/meminfo")
-                         if line.startswith("MemAvailable"))
+        with open("/proc/meminfo") as meminfo:
+            available = next(line.split()[1] for line in meminfo
+                             if line.startswith("MemAvailable"))
         return f"{ended}, {int(available) // 1024} MiB of memory available"
     except (OSError, StopIteration):
         return ended
 
 
+@pytest.hookimpl(optionalhook=True)  # an xdist hook: a run without xdist has no such hook
 def pytest_handlecrashitem(crashitem, report, sched):
     """A test whose xdist worker died is run once more, in the fresh worker xdist starts, and the
     run says so (``R`` and a line naming the test and how the worker ended); a second death
-    fails it.  An in-process JAX test (a training run's replay, a drift picture) has lost its
-    worker at the end of a few full runs, silently, and never when run again."""
+    fails it."""
     ended = _how_the_worker_ended(report)
     again = crashitem not in RERUN_AFTER_A_CRASH
     RERUN_AFTER_A_CRASH.add(crashitem)
