@@ -878,8 +878,9 @@ env.reset()
 pid = os.fork()
 if pid == 0:  # the child: the env is the parent's; using it is refused, dropping it is harmless
     import signal
-    # a hang (the refusal regressed, or JAX's exit in a forked child) ends in 15 s, not 60
-    signal.alarm(15)
+    # a hang (the refusal regressed, or JAX's exit in a forked child, which may hang after
+    # Python's exit handlers ran) ends in 5 s
+    signal.alarm(5)
     try:
         env.step(np.zeros(2, np.int32))
         print("child stepped the parent's env", flush=True)

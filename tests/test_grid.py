@@ -141,6 +141,7 @@ class KillOnce(tune.Callback):
         self.recovered += 1
 
 
+@pytest.mark.slow  # Ray trial processes compiling PPO twice: ~70 s on 2 cores
 def test_a_bad_set_fails_its_own_trials_and_a_killed_trial_resumes_bit_identical(
         local_ray, tmp_path, capsys):
     """PPO over Breakout 1 and Boxing 1 with action_head=factored, which only Boxing's 18

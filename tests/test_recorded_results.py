@@ -172,6 +172,7 @@ def test_a_recorded_ppo_run_replays_its_first_iterations_from_its_seed(tmp_path)
     assert sum(float(r["return"]) > 0 for r in episodes) >= 10  # a test of the returns
 
 
+@pytest.mark.slow  # the Nature CNN's update at 8 x 128: ~50 s on 2 cores
 def test_a_recorded_million_step_run_replays_its_first_iteration_from_its_seed(tmp_path):
     """The 1M-step Boxing runs (run_long.py) are this code's too: seed 0's first iteration of
     CleanRL's defaults (the Nature CNN, 4 epochs of 4 minibatches) logs the same losses (no
