@@ -224,13 +224,19 @@ def final_observations(plan: Plan, game, draws: Draws, out: WorkerOutputs, obs):
     return jnp.where(jnp.reshape(done, done.shape + (1,) * (obs.ndim - 1)), final, obs)
 
 
-def final_objects(plan: Plan, out: WorkerOutputs, objects):
-    """info["final_objects"]: where the step ended an episode, the objects of the RAM it ended
-    on (as info["final_obs"] is its observation), elsewhere a copy of ``objects``."""
-    if out.final_ram is None:
-        return objects + 0
-    done = ended(out)
-    return jnp.where(done[:, None, None], objects_array(plan.game, out.final_ram), objects)
+@functools.partial(jax.jit, static_argnames=("game", "autoreset"))
+def step_objects(game: str, autoreset: bool, ram, final_ram, terminated, truncated) -> dict:
+    """info["objects"] (type 0, on every game with an object table) and, with ``autoreset``,
+    info["final_objects"]: where the step ended an episode, the objects of the RAM it ended on
+    (``final_ram``; None where no episode ended), as info["final_obs"] is its observation,
+    elsewhere a copy.  Compiled apart from ``after_step``: one compilation per game and batch
+    size serves every config of the game."""
+    info = {"objects": objects_array(game, ram)}
+    if autoreset:
+        info["final_objects"] = (info["objects"] + 0 if final_ram is None else
+                                 jnp.where(((terminated != 0) | (truncated != 0))[:, None, None],
+                                           objects_array(game, final_ram), info["objects"]))
+    return info
 
 
 def ended(out: WorkerOutputs):
@@ -270,10 +276,6 @@ def after_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, ne
         "reset_step": reset_step,
         "frames_played": out.frames_played + 0,
     }
-    if has_objects(plan.game):  # type 0 on every game with an object table
-        info["objects"] = objects_array(plan.game, out.ram)
-        if plan.autoreset:
-            info["final_objects"] = final_objects(plan, out, info["objects"])
     if plan.autoreset:
         info["final_obs"] = final_observations(plan, game, draws, out, obs)
     episode_step = jnp.where(new_episode, 0, state.episode_step + 1)
@@ -293,6 +295,12 @@ def finish_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, r
     new_episode = reset_first | done if plan.autoreset else reset_first
     state, obs, reward, terminated, truncated, info = after_step(
         plan, state, draws, out, new_episode, reset_first)
+    final_obs = info.pop("final_obs", None)
+    if has_objects(plan.game):
+        info.update(step_objects(plan.game, plan.autoreset, out.ram, out.final_ram,
+                                 out.terminated, out.truncated))
+    if final_obs is not None:
+        info["final_obs"] = final_obs
     if plan.obs == "atari84":
         if isinstance(obs, jax.core.Tracer):  # traced with its caller: keep the two apart
             obs = jax.lax.optimization_barrier(obs)

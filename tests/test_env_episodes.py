@@ -217,9 +217,11 @@ def test_no_step_after_the_first_compiles_not_even_at_an_episode_end():
     with stori_jax.make("Breakout", "3.1", num_envs=1, seed=0, max_episode_frames=40) as env:
         env.reset()
         env.step([0])
-        compiled = core.after_step._cache_size(), core.push_frames._cache_size()
+        sizes = lambda: [f._cache_size() for f in (core.after_step, core.push_frames,  # noqa: E731
+                                                   core.step_objects)]
+        compiled = sizes()
         ended = 0
         for _ in range(12):
             ended += int(np.asarray(env.step([1])[3]).sum())
         assert ended >= 1
-        assert (core.after_step._cache_size(), core.push_frames._cache_size()) == compiled
+        assert sizes() == compiled

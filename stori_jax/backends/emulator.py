@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from stori_jax.backends import ale_cache
 from stori_jax.backends.layout import RESET_RENDER_BITS, SCREEN, STEP_RENDER_BITS
 from stori_jax.games.base import ram_write_rule
 from stori_jax.pixels import OBSERVE
@@ -54,16 +55,10 @@ class Emulator:
     """One ALE emulator and its per-episode STORI bookkeeping."""
 
     def __init__(self, spec: EmulatorSpec, game, seed: int, index: int, views: dict):
-        from ale_py import ALEInterface, LoggerMode, roms
+        from ale_py import roms
 
-        ALEInterface.setLoggerMode(LoggerMode.Error)
-        ale = ALEInterface()
-        ale.setInt("random_seed", int(seed))
-        ale.setFloat("repeat_action_probability", 0.0)
-        ale.setInt("max_num_frames_per_episode", int(spec.max_episode_frames))
         self.rom_path = roms.get_rom_path(game.rom_id)
-        ale.loadROM(self.rom_path)
-        self.ale = ale
+        self.ale = ale = ale_cache.acquire(self.rom_path, spec.max_episode_frames, seed)
         self.actions = list(ale.getMinimalActionSet())
         self.noop = self.actions[0]
         self.spec = spec
@@ -122,12 +117,18 @@ class Emulator:
         ``batch_seed``, the emulator first starts afresh as env ``i`` of a batch of that seed
         (ALE applies its seed when it loads the ROM: a reload is a new emulator)."""
         if batch_seed is not None:
-            self.ale.setInt("random_seed", emulator_seed(batch_seed, self.i))
-            self.ale.loadROM(self.rom_path)
+            ale_cache.reload(self.ale, self.rom_path, self.spec.max_episode_frames,
+                             emulator_seed(batch_seed, self.i))
         for name in ("reward", "terminated", "truncated", "event_fired", "episode_return",
                      "episode_length", "frames_played"):
             self.v[name][self.i] = 0
         self.reset()
+
+    def release(self) -> None:
+        """Give the ALE emulator back for reuse (``ale_cache``): this one is done."""
+        if self.ale is not None:
+            ale_cache.release(self.ale, self.rom_path, self.spec.max_episode_frames)
+            self.ale = None
 
     # -- snapshots --------------------------------------------------------------------------
 

@@ -104,13 +104,16 @@ def _remove_folders(folders: list) -> None:
 STOP_WAIT_S = 1.0  # how long close() waits for the workers to stop, then to be terminated
 
 
-def _shutdown(processes, conns, owner_pid: int, scratch: list) -> None:
-    """Stop every worker: ask politely, then terminate, then kill.  In a process forked from
-    the owner, the workers are the owner's: only this process's copies of the pipes close.
+def _shutdown(processes, conns, owner_pid: int, scratch: list, inline: list) -> None:
+    """Stop every worker: ask politely, then terminate, then kill; give this process's
+    emulators (``inline``) back for reuse.  In a process forked from the owner, the workers
+    are the owner's: only this process's copies of the pipes close.
     A Ctrl-C meanwhile is raised once they are gone (each stage waits at most STOP_WAIT_S for
     all of them together, so about 3 s at most): the finalizer runs once, so one interrupted
     here left a worker that no later close() stopped."""
     with interrupts_deferred():
+        while inline:
+            inline.pop().release()
         _stop_workers(processes, conns, owner_pid, scratch)
 
 
@@ -200,8 +203,9 @@ class SubprocBackend:
         self.processes, self.conns = [], []
         self.owner_pid = os.getpid()
         self._scratch = []  # folders of restore files the workers are still to read
+        self._inline = []  # the emulators of the calling process's envs
         self._finalizer = weakref.finalize(self, _shutdown, self.processes, self.conns,
-                                           self.owner_pid, self._scratch)
+                                           self.owner_pid, self._scratch, self._inline)
         _LIVE_BACKENDS.add(self)
 
         def spec_for(envs):
@@ -213,11 +217,10 @@ class SubprocBackend:
                               want_screen_ram=want_screen_ram, ram_event=ram_event)
 
         # the calling process emulates its envs while the workers run theirs
-        self._inline = []
         if inline:
             from stori_jax.backends.emulator import make_emulators
 
-            self._inline = make_emulators(spec_for(inline), self.views)
+            self._inline.extend(make_emulators(spec_for(inline), self.views))
         self._inline_command, self._inline_next, self._inline_broken = None, 0, None
         for envs in self.worker_envs:
             parent_conn, child_conn = ctx.Pipe(duplex=True)
