@@ -8,10 +8,13 @@ instead of compiling it again.  It lives in this run's pytest temporary folder (
 the last few); its keys hold the compiled program and JAX's version, so an entry is only ever
 loaded for the very computation that wrote it.
 
-XLA compiles the run's programs at optimisation level 0 (unless ``XLA_FLAGS`` chooses a level):
-about half the compile time, which is most of a short test's.  The level changes how fast a
-program runs, not what it computes: the pinned digests, recorded with the default level, hold
-bit for bit at 0, and the recorded training runs replay within their tolerances."""
+XLA compiles the run's programs for speed of compilation (``FAST_COMPILE_FLAGS``, unless
+``XLA_FLAGS`` sets any of them): optimisation level 0, the CPU's older elemental emitters in
+place of its fusion emitters, one codegen thread a program: a quarter of the compile time, which
+is most of a short test's.  They change how fast a program runs, not what it computes: the
+pinned digests, recorded with XLA's defaults, hold bit for bit, and the recorded training runs
+replay within their tolerances.  A jaxlib that does not know a flag would abort on it: the
+flags are tried once in a subprocess first, and left out if that fails."""
 
 import importlib.util
 import os
@@ -32,13 +35,26 @@ CACHE_SETTINGS = {
 }
 
 
-XLA_LEVEL_FLAG = "--xla_backend_optimization_level"
+FAST_COMPILE_FLAGS = {
+    "--xla_backend_optimization_level": "0",
+    "--xla_cpu_use_fusion_emitters": "false",
+    "--xla_cpu_parallel_codegen_split_count": "1",
+}
 
 
-def _compile_at_level_0() -> None:
+def _compile_fast() -> None:
     flags = os.environ.get("XLA_FLAGS", "")
-    if XLA_LEVEL_FLAG not in flags:
-        os.environ["XLA_FLAGS"] = f"{flags} {XLA_LEVEL_FLAG}=0".strip()
+    if any(name in flags for name in FAST_COMPILE_FLAGS):
+        return  # the user's choice
+    fast = f"{flags} " + " ".join(f"{k}={v}" for k, v in FAST_COMPILE_FLAGS.items())
+    import subprocess
+    import sys
+
+    probe = subprocess.run([sys.executable, "-c", "import jax; jax.jit(lambda x: x + 1)(1)"],
+                           env={**os.environ, "XLA_FLAGS": fast.strip()}, capture_output=True,
+                           timeout=120)
+    if probe.returncode == 0:
+        os.environ["XLA_FLAGS"] = fast.strip()
 
 
 @pytest.hookimpl(trylast=True)  # after pytest's own tmp_path set-up
@@ -46,8 +62,10 @@ def pytest_configure(config):
     """Set the run's compilation cache up in the controlling process, before any JAX import and
     before the xdist workers start (they inherit the environment).  A cache the user chose is
     left alone; without ``filelock`` (JAX's lock needs it) there is none."""
-    _compile_at_level_0()
-    if hasattr(config, "workerinput") or "JAX_COMPILATION_CACHE_DIR" in os.environ:
+    if hasattr(config, "workerinput"):  # the controlling process set the environment up
+        return
+    _compile_fast()
+    if "JAX_COMPILATION_CACHE_DIR" in os.environ:
         return
     if importlib.util.find_spec("filelock") is None:
         return
