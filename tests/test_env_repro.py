@@ -282,3 +282,39 @@ def test_configs_differing_only_in_numbers_share_every_compilation():
             else:
                 assert compiled() == first, f"prob {prob}, period {period} compiled again"
     assert corrupted[0] == 0 and corrupted[1] > 0
+
+
+def test_a_reused_emulator_plays_as_a_freshly_loaded_one():
+    """An emulator given back by a closed env and taken again for another seed (or put back to
+    a seed by a reseeding reset) is, frame for frame over two episodes' starts, ALE freshly
+    loaded with that seed: RAM, screen, reward, lives, the episode's end."""
+    from ale_py import ALEInterface, roms
+
+    from stori_jax.backends import ale_cache
+
+    rom, frames = roms.get_rom_path("breakout"), 2000
+    used = ale_cache.acquire(rom, frames, seed=7)
+    for _ in range(300):
+        used.act(used.getMinimalActionSet()[1])
+    ale_cache.release(used, rom, frames)
+    reused = ale_cache.acquire(rom, frames, seed=3)
+    assert reused is used  # (the test is of reuse)
+    for _ in range(100):
+        reused.act(reused.getMinimalActionSet()[2])
+    ale_cache.reload(reused, rom, frames, seed=3)  # a reseeding reset: restored, not reloaded
+    fresh = ALEInterface()
+    fresh.setInt("random_seed", 3)
+    fresh.setFloat("repeat_action_probability", 0.0)
+    fresh.setInt("max_num_frames_per_episode", frames)
+    fresh.loadROM(rom)
+    rng = np.random.default_rng(0)
+    actions = fresh.getMinimalActionSet()
+    for episode in range(2):
+        fresh.reset_game(), reused.reset_game()
+        for frame in range(400):
+            action = actions[rng.integers(len(actions))]
+            assert fresh.act(action) == reused.act(action)
+            assert np.array_equal(fresh.getRAM(), reused.getRAM()), (episode, frame)
+            assert np.array_equal(fresh.getScreenRGB(), reused.getScreenRGB()), (episode, frame)
+            assert (fresh.lives(), fresh.game_over()) == (reused.lives(), reused.game_over())
+    ale_cache.release(reused, rom, frames)

@@ -98,6 +98,25 @@ def test_episodic_life_and_reward_clip_have_envpools_meanings():
         envs.close()
 
 
+def test_reward_clip_gives_the_sign_of_rewards_above_one():
+    """Gopher scores 20 a filled hole (100 a bonked gopher): clipped, each is 1, its sign;
+    info['reward'] stays the game's."""
+    envs = envpool.make("Gopher-v5", num_envs=2, seed=0, reward_clip=True, num_workers=0)
+    try:
+        envs.reset()
+        rng = np.random.default_rng(0)
+        above_one = 0
+        for _ in range(300):
+            _, reward, _, info = envs.step(rng.integers(0, 8, 2))
+            np.testing.assert_array_equal(reward, np.sign(info["reward"]))
+            above_one += int((np.abs(info["reward"]) > 1).sum())
+            if above_one >= 3:
+                break
+        assert above_one >= 3, "Gopher scores more than 1 in a step within 300 steps"
+    finally:
+        envs.close()
+
+
 def test_python_api_reset_send_recv_async_and_env_ids():
     """gym's reset() returns the observations alone (gym_reset_return_info adds the info);
     async_reset() then recv() returns the reset as a step; send() takes env_id in any order;

@@ -229,8 +229,9 @@ def test_parts_are_whole_iterations_as_even_as_they_go():
 
 
 def test_a_run_folder_behind_its_tune_checkpoint_is_restored_from_it(tmp_path):
-    """The archive replaces a folder that lost its files, is behind it, or holds a damaged
-    checkpoint; a folder as far as the archive (shared storage) is kept as it is."""
+    """The archive replaces a folder that lost its files, is behind it (a file the archive
+    lacks does not survive), or holds a damaged checkpoint; a folder as far as the archive
+    (shared storage) is kept as it is."""
     from types import SimpleNamespace
 
     from baselines.runs import save_checkpoint
@@ -249,9 +250,11 @@ def test_a_run_folder_behind_its_tune_checkpoint_is_restored_from_it(tmp_path):
     assert restore_run(run, saved, agent)
     assert {p.name: p.read_bytes() for p in run.iterdir()} == files
     save_checkpoint(run / "checkpoint.pkl", dict(format="fake", steps=32))  # behind
+    (run / "eval-sampled.json").write_text("{}")  # stale: not in the archive
     assert trained_iterations(run, agent, 32) == 1
     assert restore_run(run, saved, agent)
     assert trained_iterations(run, agent, 32) == 2
+    assert {p.name: p.read_bytes() for p in run.iterdir()} == files
     (run / "checkpoint.pkl").write_bytes(b"junk")  # a damaged checkpoint is replaced too
     assert trained_iterations(run, agent, 32) == -1
     assert restore_run(run, saved, agent)
