@@ -163,13 +163,14 @@ def _replay_first_iterations(recorded_run: Path, iterations: int, out: Path) -> 
 
 
 def test_a_recorded_ppo_run_replays_its_first_iterations_from_its_seed(tmp_path):
-    """The recorded PPO runs are this code's: Breakout 3.1 seed 0, trained again for four
-    iterations from its recorded config, logs the same 16 episodes and the same losses."""
+    """The recorded PPO runs are this code's: Breakout 3.1 seed 0, trained again for three
+    iterations from its recorded config, logs the same 11 episodes (the first ones end in the
+    third) and the same losses."""
     from baselines.evidence.run_evidence import run_dir
 
-    episodes = _replay_first_iterations(run_dir("Breakout", "3.1", "ppo", 0), 4, tmp_path)
-    assert len(episodes) == 16
-    assert sum(float(r["return"]) > 0 for r in episodes) >= 10  # a test of the returns
+    episodes = _replay_first_iterations(run_dir("Breakout", "3.1", "ppo", 0), 3, tmp_path)
+    assert len(episodes) == 11
+    assert sum(float(r["return"]) > 0 for r in episodes) >= 6  # a test of the returns
 
 
 @pytest.mark.slow  # the Nature CNN's update at 8 x 128: ~50 s on 2 cores
