@@ -225,17 +225,18 @@ def final_observations(plan: Plan, game, draws: Draws, out: WorkerOutputs, obs):
 
 
 @functools.partial(jax.jit, static_argnames=("game", "autoreset"))
-def step_objects(game: str, autoreset: bool, ram, final_ram, terminated, truncated) -> dict:
+def step_objects(game: str, autoreset: bool, ram, final_ram, done) -> dict:
     """info["objects"] (type 0, on every game with an object table) and, with ``autoreset``,
-    info["final_objects"]: where the step ended an episode, the objects of the RAM it ended on
-    (``final_ram``; None where no episode ended), as info["final_obs"] is its observation,
+    info["final_objects"]: where the step ended an episode (``done``, see :func:`ended`), the
+    objects of the RAM it ended on (``final_ram``; None where no episode ended), as
+    info["final_obs"] is its observation,
     elsewhere a copy.  Compiled apart from ``after_step``: one compilation per game and batch
     size serves every config of the game."""
     info = {"objects": objects_array(game, ram)}
     if autoreset:
         info["final_objects"] = (info["objects"] + 0 if final_ram is None else
-                                 jnp.where(((terminated != 0) | (truncated != 0))[:, None, None],
-                                           objects_array(game, final_ram), info["objects"]))
+                                 jnp.where(done[:, None, None], objects_array(game, final_ram),
+                                           info["objects"]))
     return info
 
 
@@ -297,8 +298,7 @@ def finish_step(plan: Plan, state: EnvState, draws: Draws, out: WorkerOutputs, r
         plan, state, draws, out, new_episode, reset_first)
     final_obs = info.pop("final_obs", None)
     if has_objects(plan.game):
-        info.update(step_objects(plan.game, plan.autoreset, out.ram, out.final_ram,
-                                 out.terminated, out.truncated))
+        info.update(step_objects(plan.game, plan.autoreset, out.ram, out.final_ram, done))
     if final_obs is not None:
         info["final_obs"] = final_obs
     if plan.obs == "atari84":
